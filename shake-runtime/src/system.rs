@@ -1,0 +1,145 @@
+//! The traits that a declared system implements.
+//!
+//! `constrained_system!` emits an impl of [`Hamiltonian`] and of
+//! [`ConstrainedSystem`] for the struct it declares; hand-written systems (the
+//! benchmarks' baselines, the tests' reference models) implement the same
+//! traits. The split follows capability: a base map φ_h needs only
+//! [`Hamiltonian`]; SHAKE and RATTLE need [`ConstrainedSystem`].
+//!
+//! # Conventions (MISSION.md, the paper's Example 1.1)
+//!
+//! - Phase space R^{2d}, z = (q, p), symplectic form ω = Σ dq_k ∧ dp_k.
+//! - Hamiltonian vector field X_F = (∂F/∂p, −∂F/∂q).
+//! - Poisson bracket {F,G} = Σ_k (∂F/∂q_k ∂G/∂p_k − ∂F/∂p_k ∂G/∂q_k), so that
+//!   dF·X_G = {F,G} and dF/dt = {F,H} along the flow of H.
+//! - Constraints g: R^{2d} → R^m, M = {g = 0}; hidden constraints {g_i, H} = 0
+//!   define M^H; N_ij = {{H,g_i},g_j} must be invertible on M^H.
+//!
+//! # Storage
+//!
+//! Every output is a flat `&mut [f64]`. Matrices are **column-major**, as in
+//! nalgebra, so a `DMatrix::as_mut_slice()` can be passed directly: entry
+//! (i, j) of an r×c matrix is `out[i + j*r]`. Gradients and Jacobians with
+//! respect to z = (q, p) put the q-columns first: column k < d is ∂/∂q_k,
+//! column d + k is ∂/∂p_k.
+//!
+//! Generated code writes only the entries that are not identically zero
+//! (the *sparsity pattern*); the caller zeroes each output buffer once when it
+//! allocates it and never writes into it otherwise. This is what lets a
+//! structurally zero block (g_p of a holonomic constraint, H_qp of a separable
+//! H) cost nothing at run time.
+//!
+//! Slices of the wrong length are a programming error, not a numerical
+//! failure: implementations may panic on them.
+
+/// How the constraint functions depend on the state. This decides how the
+/// fibre flow exp(Σ λ_i X_{g_i}) is computed (see the `fibre` module).
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
+pub enum ConstraintKind {
+    /// m = 0: a plain Hamiltonian system, no fibres.
+    None,
+    /// g = g(q) (Section 5.1): the fibre flow is the momentum kick
+    /// p ↦ p − g_q(q)ᵀλ, exact in closed form. Takes precedence over
+    /// [`ConstraintKind::Quadratic`] when both hold (the pendulum).
+    Holonomic,
+    /// Every g_i is a polynomial of degree ≤ 2 in z = (q, p) (the Hopf
+    /// constraint of Section 5.4): the fibre flow is the flow of a linear
+    /// (affine) vector field, computed as a matrix exponential.
+    Quadratic,
+    /// Anything else: the fibre flow is integrated numerically to round-off
+    /// (the paper's Discussion).
+    General,
+}
+
+impl ConstraintKind {
+    /// True when no constraint depends on the momenta (or there is none).
+    pub const fn is_holonomic(self) -> bool {
+        matches!(self, ConstraintKind::None | ConstraintKind::Holonomic)
+    }
+}
+
+/// A Hamiltonian H(q, p) on R^{2d} and its derivatives.
+///
+/// This is all a base map φ_h needs.
+pub trait Hamiltonian {
+    /// The number d of degrees of freedom: q and p are in R^d.
+    const DOF: usize;
+    /// H = T(p) + V(q): H_qp ≡ 0, H_q depends on q only and H_p on p only,
+    /// which makes Störmer–Verlet and symplectic Euler explicit.
+    const SEPARABLE: bool;
+    /// H = ½ pᵀ A p + V(q) with a constant matrix A (T quadratic in p, with
+    /// coefficients independent of q): H_pp is constant.
+    const QUADRATIC_KINETIC: bool;
+
+    /// H(q, p).
+    fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64;
+
+    /// ∂H/∂q, written into `h_q` (length d).
+    fn grad_q(&self, q: &[f64], p: &[f64], h_q: &mut [f64]);
+
+    /// ∂H/∂p, written into `h_p` (length d).
+    fn grad_p(&self, q: &[f64], p: &[f64], h_p: &mut [f64]);
+
+    /// Both halves of ∇H at once; generated code shares their common
+    /// subexpressions.
+    fn gradient(&self, q: &[f64], p: &[f64], h_q: &mut [f64], h_p: &mut [f64]) {
+        self.grad_q(q, p, h_q);
+        self.grad_p(q, p, h_p);
+    }
+
+    /// The Hessian H_zz (2d × 2d, column-major, z = (q, p)); only its
+    /// structurally nonzero entries are written.
+    fn hessian(&self, q: &[f64], p: &[f64], h_zz: &mut [f64]);
+}
+
+/// A Hamiltonian with constraints g_1, ..., g_m (m = [`Self::CONSTRAINTS`]).
+///
+/// Everything SHAKE and RATTLE need: the constraints and their Jacobian, the
+/// hidden constraints {g_i, H} and their Jacobian, the nondegeneracy matrix
+/// N_ij = {{H,g_i},g_j}, the λ-weighted Hessian Σ λ_i ∇²g_i, and (where one
+/// exists in closed form) the fibre flow.
+pub trait ConstrainedSystem: Hamiltonian {
+    /// The number m of constraints.
+    const CONSTRAINTS: usize;
+    /// How g depends on z; picks the fibre flow.
+    const KIND: ConstraintKind;
+    /// The structurally nonzero entries (i, k) of g_z (m × 2d), k < d for
+    /// ∂g_i/∂q_k and k ≥ d for ∂g_i/∂p_{k−d}, sorted by i then k. Banded
+    /// patterns (chains) let the runtime pick a structured solve.
+    const JACOBIAN_PATTERN: &'static [(usize, usize)];
+    /// A name for each constraint, for error messages and diagnostics.
+    const CONSTRAINT_NAMES: &'static [&'static str];
+
+    /// g(q, p), written into `g` (length m).
+    fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]);
+
+    /// g_z = [g_q  g_p] (m × 2d, column-major); only entries of
+    /// [`Self::JACOBIAN_PATTERN`] are written.
+    fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]);
+
+    /// Σ_i λ_i ∇²g_i (2d × 2d, column-major): the derivative of the fibre
+    /// vector field Σ λ_i X_{g_i}, needed for tangent maps and for the
+    /// numerical fibre flow. Only structurally nonzero entries are written.
+    fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]);
+
+    /// The hidden constraints {g_i, H} (length m); M^H is where they and g
+    /// vanish.
+    fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]);
+
+    /// The Jacobian of z ↦ {g_i, H}(z) (m × 2d, column-major).
+    fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], out: &mut [f64]);
+
+    /// N_ij = {{H, g_i}, g_j} (m × m, column-major). The nondegeneracy
+    /// assumption of the paper (Assumption 1.1, in the form of Example 1.2)
+    /// is that N is invertible on M^H. Note d/dσ_j {g_i,H}(exp(σ X_{g_j})z)
+    /// = {{g_i,H},g_j} = −N_ij: RATTLE's Newton matrix is −N.
+    fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]);
+
+    /// The fibre flow z ↦ exp(Σ λ_i X_{g_i})(z) in closed form, applied in
+    /// place. Returns `false`, leaving q and p untouched, when the system has
+    /// no closed form; the runtime then uses its own (see `fibre`).
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+        let _ = (lambda, q, p);
+        false
+    }
+}

@@ -1,0 +1,16 @@
+//! # shake
+//!
+//! Geometric SHAKE and RATTLE (McLachlan, Modin, Verdier, Wilkins, *Geometric
+//! generalisations of SHAKE and RATTLE*) for Hamiltonian systems with
+//! holonomic or momentum-dependent (coisotropic) constraints.
+//!
+//! This facade re-exports the two crates: [`constrained_system!`] (from
+//! `shake-macros`) declares a system and generates its derivatives at compile
+//! time; [`runtime`] (`shake-runtime`) integrates it.
+
+pub use shake_macros::constrained_system;
+pub use shake_runtime as runtime;
+pub use shake_runtime::*;
+
+/// Re-exported so that generated code and users name one `nalgebra`.
+pub use nalgebra;
