@@ -4,8 +4,66 @@
 //! ([`Hamiltonian`], [`ConstrainedSystem`]), base maps, fibre flows, and the
 //! geometric SHAKE and RATTLE drivers of McLachlan, Modin, Verdier and
 //! Wilkins.
+//!
+//! # From a system to a trajectory
+//!
+//! A system (declared with `constrained_system!`, or written by hand as in
+//! [`examples`]) is integrated by an [`Integrator`] built from the system, a
+//! [`BaseMap`] φ_h ([`ImplicitMidpoint`], [`StormerVerlet`],
+//! [`SymplecticEuler`]) and a step size h:
+//!
+//! ```
+//! use shake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
+//!
+//! let pendulum = Pendulum { gravity: 9.81, length: 1.0 };
+//! let mut rattle = Integrator::new(pendulum, ImplicitMidpoint, 0.01).rattle().with_diagnostics();
+//! // Bring a rough initial guess onto M^H = {g = 0, {g,H} = 0}.
+//! let z0 = rattle.project_to_hidden(&State::from_slices(&[0.7, -0.7], &[1.0, 1.0])).unwrap();
+//! // Ten seconds, one stored state every 100 steps.
+//! let out = rattle.run(z0, Stop::Time(10.0)).stride(100).execute();
+//! let traj = out.into_result().expect("a pendulum is well posed");
+//! let e0 = traj.diagnostics[0].energy;
+//! for d in &traj.diagnostics {
+//!     assert!(d.constraint < 1e-13 && d.hidden_constraint < 1e-12);
+//!     assert!((d.energy - e0).abs() < 1e-3 * e0.abs());
+//! }
+//! ```
+//!
+//! # The methods (the paper's Sections 1 and 4)
+//!
+//! - [`shake`]: S_h(z0) = φ_h(exp(Σ λ_i X_{g_i})(z0)) with g(S_h(z0)) = 0.
+//! - [`rattle`]: R_h = Π ∘ S_h, Π the projection along the fibre onto M^H.
+//! - [`fibre`]: the fibre flows exp(Σ λ_i X_{g_i}), exact to round-off.
+//! - [`newton`]: every implicit equation is solved to round-off.
+//! - [`diagnostics`] and [`error`]: what a run measures, and how it fails.
 #![warn(missing_docs)]
+// Numerical kernels index several arrays with one loop variable, as the
+// formulas do; iterator chains would hide them.
+#![allow(clippy::needless_range_loop)]
+// `!(x <= limit)` is deliberate throughout: it is true for NaN too.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod base_map;
+pub mod diagnostics;
+pub mod error;
+pub mod examples;
+pub mod fibre;
+pub mod integrator;
+mod linalg;
+pub mod newton;
+pub mod rattle;
+pub mod shake;
+mod state;
 pub mod system;
+mod unconstrained;
 
+pub use base_map::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
+pub use diagnostics::DiagnosticRecord;
+pub use error::{SolveError, Stage, StepError};
+pub use fibre::FibreFlow;
+pub use integrator::{Integrator, Method, Options, Run, RunOutcome, StepInfo, Stop, Trajectory};
+pub use nalgebra;
+pub use newton::NewtonOptions;
+pub use state::State;
 pub use system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
+pub use unconstrained::Unconstrained;

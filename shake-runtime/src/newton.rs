@@ -1,0 +1,132 @@
+//! Newton iterations to round-off, and the rule that stops them.
+//!
+//! Every implicit equation of the runtime (the stage equations of implicit
+//! base maps, SHAKE's equation for λ, RATTLE's equation for σ, the projection
+//! of initial data) is solved by Newton's method *to round-off*: the
+//! geometric properties of SHAKE and RATTLE (presymplecticity, symmetry,
+//! g = 0 after every step) hold exactly for the exact solution of these
+//! equations, so a loose tolerance would show up as drift.
+//!
+//! # Stopping rule
+//!
+//! There is no fixed tolerance on the residual. After each update Δ of the
+//! unknown x, the iteration stops when
+//!
+//! 1. ‖Δ‖ ≤ `step_tolerance` · ‖x‖ (default 4ε: the update no longer changes
+//!    x beyond its last bits), or Δ = 0 or the residual is exactly 0; or
+//! 2. *stagnation*: ‖Δ‖ did not at least halve compared with the previous
+//!    update while already ‖Δ‖ ≤ `stagnation_threshold` · max(‖x‖, 1)
+//!    (default 1e-6): the iteration is now driven by rounding noise, and more
+//!    iterations cannot improve x.
+//!
+//! Newton converges quadratically, so both happen within one or two
+//! iterations of the first one at round-off. If neither happens within
+//! `max_iterations`, the step fails with a typed error carrying the residual.
+
+/// Tolerances and limits of every Newton iteration of a step.
+///
+/// ```
+/// use shake_runtime::NewtonOptions;
+/// let opts = NewtonOptions { max_iterations: 30, ..NewtonOptions::default() };
+/// assert_eq!(opts.step_tolerance, 4.0 * f64::EPSILON);
+/// ```
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct NewtonOptions {
+    /// Stop when ‖Δx‖ ≤ `step_tolerance` · ‖x‖ (default 4ε).
+    pub step_tolerance: f64,
+    /// Stagnation is only accepted once ‖Δx‖ ≤ `stagnation_threshold` ·
+    /// max(‖x‖, 1) (default 1e-6).
+    pub stagnation_threshold: f64,
+    /// Iterations before the step fails with
+    /// [`StepError::NewtonNotConverged`](crate::StepError::NewtonNotConverged)
+    /// (default 50).
+    pub max_iterations: usize,
+}
+
+impl Default for NewtonOptions {
+    fn default() -> Self {
+        NewtonOptions {
+            step_tolerance: 4.0 * f64::EPSILON,
+            stagnation_threshold: 1e-6,
+            max_iterations: 50,
+        }
+    }
+}
+
+/// What the stopping rule says after an update.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub(crate) enum Verdict {
+    Continue,
+    Converged,
+}
+
+/// Tracks the size of successive updates of one Newton iteration and applies
+/// the stopping rule of the module docs.
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct Monitor {
+    opts: NewtonOptions,
+    prev_step: f64,
+    pub(crate) iterations: usize,
+}
+
+impl Monitor {
+    pub(crate) fn new(opts: NewtonOptions) -> Self {
+        Monitor {
+            opts,
+            prev_step: f64::INFINITY,
+            iterations: 0,
+        }
+    }
+
+    /// Called after each update with ‖Δx‖ and the updated ‖x‖ (∞-norms).
+    pub(crate) fn update(&mut self, step: f64, x: f64) -> Verdict {
+        self.iterations += 1;
+        let prev = self.prev_step;
+        self.prev_step = step;
+        if step <= self.opts.step_tolerance * x {
+            return Verdict::Converged;
+        }
+        if step > 0.5 * prev && step <= self.opts.stagnation_threshold * x.max(1.0) {
+            return Verdict::Converged;
+        }
+        Verdict::Continue
+    }
+
+    /// True once the iteration budget is spent.
+    pub(crate) fn exhausted(&self) -> bool {
+        self.iterations >= self.opts.max_iterations
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn newton_for_sqrt2_stops_at_round_off() {
+        let mut x: f64 = 1.0;
+        let mut mon = Monitor::new(NewtonOptions::default());
+        loop {
+            let dx = -(x * x - 2.0) / (2.0 * x);
+            x += dx;
+            if mon.update(dx.abs(), x.abs()) == Verdict::Converged {
+                break;
+            }
+            assert!(!mon.exhausted());
+        }
+        assert!((x - 2f64.sqrt()).abs() <= f64::EPSILON * 2.0);
+        assert!(mon.iterations <= 7, "{}", mon.iterations);
+    }
+
+    #[test]
+    fn a_slow_iteration_is_not_mistaken_for_stagnation() {
+        let mut mon = Monitor::new(NewtonOptions::default());
+        // Steps halving exactly far above the threshold: keep going.
+        assert_eq!(mon.update(1e-2, 1.0), Verdict::Continue);
+        assert_eq!(mon.update(0.9e-2, 1.0), Verdict::Continue);
+        // Tiny but still decreasing fast: keep going.
+        assert_eq!(mon.update(1e-9, 1.0), Verdict::Continue);
+        // Tiny and no longer decreasing: stagnation.
+        assert_eq!(mon.update(1e-9, 1.0), Verdict::Converged);
+    }
+}

@@ -1,0 +1,241 @@
+//! Geometric RATTLE (the paper's Definition 1.2) and the projections it is
+//! made of.
+//!
+//! RATTLE is SHAKE followed by the projection Π along the fibre onto the
+//! hidden constraint set M^H = {g = 0, {g_i, H} = 0}:
+//! R_h = Π ∘ S_h, with Π(z) = exp(Σ σ_i X_{g_i})(z) and σ chosen so that
+//! {g_i, H}(Π(z)) = 0 (the paper's Corollary 2.3).
+//!
+//! # The equation for σ
+//!
+//! Newton's method from σ = 0, to round-off. Its matrix is
+//! d/dσ_j {g_i, H}(exp(Σ σ_k X_{g_k})(z)) = d{g_i,H} · X_{g_j} = {{g_i,H},g_j}
+//! = −N_ij, with N the nondegeneracy matrix of the system, evaluated at the
+//! current iterate (exact where the X_{g_i} commute, as in SHAKE). So the
+//! update is σ ← σ + N⁻¹ {g, H}.
+//!
+//! # Why a run projects only where a state is observed
+//!
+//! Π maps a whole fibre to one point, and S_h does too (SHAKE's result does
+//! not depend on where on the fibre of z0 it starts, Section 4). Since
+//! R_h(z) = Π(S_h(z)) lies on the fibre of S_h(z),
+//! S_h(R_h(z)) = S_h(S_h(z)), and by induction
+//! Π ∘ S_hᵏ = Π ∘ R_hᵏ (the paper's equation after Proposition 4.2). RATTLE is
+//! therefore a post-processing of SHAKE: a run steps with SHAKE and applies
+//! Π only to the states it returns or shows to an observer.
+
+use crate::error::{Stage, StepError};
+use crate::linalg::{inverse_norm1_estimate, lu_det, lu_factor, lu_solve, norm1, norm_inf};
+use crate::newton::{Monitor, NewtonOptions, Verdict};
+use crate::shake::Workspace;
+use crate::system::ConstrainedSystem;
+use crate::SolveError;
+
+/// What a projection did.
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub(crate) struct ProjectionReport {
+    pub(crate) iterations: usize,
+    /// ‖σ‖∞ (or ‖Δz‖∞ for the projection onto M).
+    pub(crate) displacement: f64,
+}
+
+/// Π: moves (q, p) ∈ M along its fibre onto M^H, in place.
+pub(crate) fn project_hidden<S: ConstrainedSystem>(
+    sys: &S,
+    q: &mut [f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+) -> Result<ProjectionReport, StepError> {
+    let (d, m) = (ws.d, ws.m);
+    if m == 0 {
+        return Ok(ProjectionReport::default());
+    }
+    ws.y[..d].copy_from_slice(q);
+    ws.y[d..].copy_from_slice(p);
+    ws.sigma.fill(0.0);
+    let mut mon = Monitor::new(*opts);
+    let mut converged = false;
+    loop {
+        ws.z1.copy_from_slice(&ws.y);
+        {
+            let (zq, zp) = ws.z1.split_at_mut(d);
+            ws.fibre
+                .apply(sys, &ws.sigma, zq, zp)
+                .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
+        }
+        sys.hidden_constraints(&ws.z1[..d], &ws.z1[d..], &mut ws.hidden);
+        let r = norm_inf(&ws.hidden);
+        if !r.is_finite() {
+            return Err(StepError::from_solve(
+                Stage::Rattle,
+                SolveError::NonFinite {
+                    iterations: mon.iterations,
+                },
+            ));
+        }
+        if converged || r == 0.0 {
+            break;
+        }
+        if mon.exhausted() {
+            return Err(StepError::from_solve(
+                Stage::Rattle,
+                SolveError::NotConverged {
+                    iterations: mon.iterations,
+                    residual: r,
+                },
+            ));
+        }
+        sys.nondegeneracy_matrix(&ws.z1[..d], &ws.z1[d..], &mut ws.n_mat);
+        ws.jac.copy_from_slice(&ws.n_mat);
+        lu_factor(&mut ws.jac, m, &mut ws.piv).map_err(|_| {
+            StepError::from_solve(
+                Stage::Rattle,
+                SolveError::Singular {
+                    iterations: mon.iterations,
+                },
+            )
+        })?;
+        ws.delta.copy_from_slice(&ws.hidden);
+        lu_solve(&ws.jac, m, &ws.piv, &mut ws.delta);
+        for (s, ds) in ws.sigma.iter_mut().zip(&ws.delta) {
+            *s += ds;
+        }
+        converged = mon.update(norm_inf(&ws.delta), norm_inf(&ws.sigma)) == Verdict::Converged;
+    }
+    q.copy_from_slice(&ws.z1[..d]);
+    p.copy_from_slice(&ws.z1[d..]);
+    Ok(ProjectionReport {
+        iterations: mon.iterations,
+        displacement: norm_inf(&ws.sigma),
+    })
+}
+
+/// Brings (q, p) onto M = {g = 0} by Gauss–Newton with the minimum-norm
+/// update Δz = −g_zᵀ (g_z g_zᵀ)⁻¹ g(z) (orthogonal to M, not along a fibre:
+/// fibres lie inside level sets of g), in place.
+pub(crate) fn project_constraint<S: ConstrainedSystem>(
+    sys: &S,
+    q: &mut [f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+) -> Result<ProjectionReport, StepError> {
+    let (d, m) = (ws.d, ws.m);
+    if m == 0 {
+        return Ok(ProjectionReport::default());
+    }
+    let n = 2 * d;
+    let mut mon = Monitor::new(*opts);
+    let mut converged = false;
+    let mut moved = 0.0f64;
+    loop {
+        sys.constraints(q, p, &mut ws.g);
+        let r = norm_inf(&ws.g);
+        if !r.is_finite() {
+            return Err(StepError::from_solve(
+                Stage::ProjectionOntoM,
+                SolveError::NonFinite {
+                    iterations: mon.iterations,
+                },
+            ));
+        }
+        if converged || r == 0.0 {
+            break;
+        }
+        if mon.exhausted() {
+            return Err(StepError::from_solve(
+                Stage::ProjectionOntoM,
+                SolveError::NotConverged {
+                    iterations: mon.iterations,
+                    residual: r,
+                },
+            ));
+        }
+        sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+        let gz = &ws.g_z_1;
+        for j in 0..m {
+            for i in 0..m {
+                ws.gram[i + j * m] = (0..n).map(|k| gz[i + k * m] * gz[j + k * m]).sum();
+            }
+        }
+        lu_factor(&mut ws.gram, m, &mut ws.piv).map_err(|_| {
+            StepError::from_solve(
+                Stage::ProjectionOntoM,
+                SolveError::Singular {
+                    iterations: mon.iterations,
+                },
+            )
+        })?;
+        ws.delta.copy_from_slice(&ws.g);
+        lu_solve(&ws.gram, m, &ws.piv, &mut ws.delta);
+        let mut step = 0.0f64;
+        for k in 0..n {
+            let dz: f64 = (0..m).map(|i| gz[i + k * m] * ws.delta[i]).sum();
+            step = step.max(dz.abs());
+            if k < d {
+                q[k] -= dz;
+            } else {
+                p[k - d] -= dz;
+            }
+        }
+        moved += step;
+        let size = norm_inf(q).max(norm_inf(p));
+        converged = mon.update(step, size) == Verdict::Converged;
+    }
+    Ok(ProjectionReport {
+        iterations: mon.iterations,
+        displacement: moved,
+    })
+}
+
+/// N at a point, factorised: its determinant, ‖N‖₁ and an estimate of
+/// ‖N⁻¹‖₁ (∞ when N is exactly singular).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct NondegeneracyCheck {
+    pub(crate) det: f64,
+    pub(crate) norm: f64,
+    pub(crate) inverse_norm: f64,
+}
+
+impl NondegeneracyCheck {
+    /// The condition number of N relative to `reference` (‖N‖₁ at the
+    /// start): max(‖N‖₁, reference) · ‖N⁻¹‖₁. For m ≥ 2 this is at least the
+    /// usual κ₁(N); for m = 1 (where κ is always 1) it measures how much N
+    /// has shrunk since the start.
+    pub(crate) fn condition(&self, reference: f64) -> f64 {
+        self.norm.max(reference) * self.inverse_norm
+    }
+}
+
+/// Evaluates and factorises N(q, p).
+pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
+    sys: &S,
+    q: &[f64],
+    p: &[f64],
+    ws: &mut Workspace,
+) -> NondegeneracyCheck {
+    let m = ws.m;
+    sys.nondegeneracy_matrix(q, p, &mut ws.n_mat);
+    ws.jac.copy_from_slice(&ws.n_mat);
+    let norm = norm1(&ws.jac, m);
+    if !norm.is_finite() {
+        return NondegeneracyCheck {
+            det: f64::NAN,
+            norm,
+            inverse_norm: f64::INFINITY,
+        };
+    }
+    match lu_factor(&mut ws.jac, m, &mut ws.piv) {
+        Err(_) => NondegeneracyCheck {
+            det: 0.0,
+            norm,
+            inverse_norm: f64::INFINITY,
+        },
+        Ok(()) => NondegeneracyCheck {
+            det: lu_det(&ws.jac, m, &ws.piv),
+            norm,
+            inverse_norm: inverse_norm1_estimate(&ws.jac, m, &ws.piv, &mut ws.s1, &mut ws.s2),
+        },
+    }
+}
