@@ -1,9 +1,173 @@
-//! The `constrained_system!` macro (placeholder until the pipeline lands).
-use proc_macro::TokenStream;
+//! The `constrained_system!` macro of `shake`.
+//!
+//! The expansion reads top-down: [`parse`] the declaration into a typed view
+//! that keeps the user's spans, [`lower`] it into the hash-consed expression
+//! graph of [`symbolic`] (kept canonical by [`simplify`]), differentiate it
+//! ([`diff`]), [`check`] the paper's assumptions, then [`emit`] straight-line
+//! code, scheduled by [`cse`].
 
-/// Declares a constrained Hamiltonian system. Grammar: see the crate docs (to come).
+mod check;
+mod cse;
+mod diff;
+mod emit;
+mod lower;
+mod parse;
+mod simplify;
+mod symbolic;
+
+#[cfg(test)]
+mod tests;
+
+use proc_macro::TokenStream;
+use proc_macro2::TokenStream as TokenStream2;
+use quote::quote;
+
+/// Declares a constrained Hamiltonian system: a struct whose `f64` fields are
+/// the parameters, with generated impls of `shake::runtime::Hamiltonian` and
+/// `shake::runtime::ConstrainedSystem` (H, g and every derivative SHAKE and
+/// RATTLE need, differentiated symbolically at compile time).
+///
+/// ```ignore
+/// // (Compiled as an integration test of the `shake` facade: tests/macro_*.rs.)
+/// use shake::constrained_system;
+///
+/// constrained_system! {
+///     /// Planar pendulum (the paper's Example 1.3).
+///     pub struct Pendulum {
+///         parameters { length, gravity }
+///         dof q[2], p[2];
+///         let r2 = q[0]^2 + q[1]^2;
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+///         constraints {
+///             rod: r2 - length^2,
+///         }
+///     }
+/// }
+/// let pendulum = Pendulum::new(1.0, 9.81);
+/// ```
+///
+/// A chain of `N` links, anchored at the origin:
+///
+/// ```ignore
+/// # use shake::constrained_system;
+/// constrained_system! {
+///     pub struct Chain {
+///         parameters { length, gravity }
+///         const N = 8;
+///         dof q[2*N], p[2*N];
+///         hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
+///         constraints {
+///             link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
+///                 else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
+///         }
+///     }
+/// }
+/// ```
+///
+/// # Grammar
+///
+/// ```text
+/// system     := doc* vis? "struct" Name "{" item* "}"
+/// item       := "parameters" "{" name,* "}"           -- pub f64 fields, in `new(..)` order
+///             | "const" NAME "=" expr ";"             -- compile-time number (integer for indices)
+///             | "dof" q "[" index "]" "," p "[" index "]" ";"   -- z = (q, p) ∈ R^{2d}
+///             | "coordinates" name,+ ";" "momenta" name,+ ";"  -- named scalars, paired in order
+///             | "let" name "=" expr ";"               -- intermediate, usable below
+///             | "hamiltonian" "=" expr ";"
+///             | "constraints" "{" (cname ("[" k "in" index ".." index "]")? ":" expr),* "}"
+/// expr       := expr ("+" | "-" | "*" | "/") expr | expr "^" expr | "-" expr | "(" expr ")"
+///             | number | name | q "[" index "]" | func "(" expr ")"
+///             | "sum" i "in" index ".." index "{" expr "}"
+///             | "if" cond "{" expr "}" "else" "{" expr "}"      -- decided at compile time
+/// func       := sqrt | sin | cos | tan | exp | ln
+/// index      := integer expression of literals, consts and bound indices: + - * / % ( )
+/// cond       := index ("==" | "!=" | "<" | "<=" | ">" | ">=") index, joined by && ||
+/// ```
+///
+/// `^` binds tighter than unary minus (`-x^2 = -(x^2)`) and is
+/// right-associative; its exponent must be a constant (integer exponents are
+/// emitted as products or `powi`). Families `name[k in a..b]` declare one
+/// constraint per k, named `name[k]`. One (`dof`) or the other
+/// (`coordinates`/`momenta`) declares the state; `hamiltonian` is required,
+/// `constraints` may be absent (m = 0).
+///
+/// # What is generated
+///
+/// The struct (the user's doc and visibility, one `pub f64` field per
+/// parameter, `new`), and impls of `Hamiltonian` (H, H_q, H_p, H_zz,
+/// `SEPARABLE`, `QUADRATIC_KINETIC`) and `ConstrainedSystem` (g, g_z,
+/// Σλ_i∇²g_i, {g_i,H}, its Jacobian, N_ij = {{H,g_i},g_j}, `KIND`,
+/// `JACOBIAN_PATTERN`, `CONSTRAINT_NAMES`, and for holonomic constraints the
+/// closed-form fibre flow p ← p − g_q(q)ᵀλ). Only structurally nonzero
+/// entries are computed and written.
+///
+/// # Refusals (compile errors at the user's tokens)
+///
+/// Unknown symbols and functions, non-differentiable functions, indices out
+/// of range, non-constant exponents, duplicate names, constraints that do not
+/// depend on the state, duplicate or dependent constraints, pairs {g_i,g_j}
+/// that do not vanish on M (coisotropy), and an identically singular N
+/// (nondegeneracy, the paper's Section 5.2).
 #[proc_macro]
 pub fn constrained_system(input: TokenStream) -> TokenStream {
-    let _ = input;
-    TokenStream::new()
+    expand(input.into()).into()
+}
+
+/// The whole pipeline on `proc_macro2` tokens (testable outside a compiler).
+fn expand(input: TokenStream2) -> TokenStream2 {
+    let def: parse::SystemDef = match syn::parse2(input) {
+        Ok(d) => d,
+        Err(e) => return e.to_compile_error(),
+    };
+    let errors = |es: Vec<syn::Error>| {
+        let errs = es.iter().map(syn::Error::to_compile_error);
+        let fallback = emit::fallback(&def);
+        quote!(#(#errs)* #fallback)
+    };
+    let mut sys = match lower::lower(&def) {
+        Ok(s) => s,
+        Err(es) => return errors(es),
+    };
+    let g: Vec<_> = sys.constraints.iter().map(|c| c.node).collect();
+    let der = diff::Derived::compute(&mut sys.graph, sys.dof, sys.hamiltonian, &g);
+    if let Err(es) = check::check(&mut sys, &der) {
+        return errors(es);
+    }
+    let doc = system_doc(&sys, &der);
+    let items = emit::struct_items(&def, &doc);
+    let impls = emit::impls(&def, &sys, &der);
+    quote!(#items #impls)
+}
+
+/// A generated doc section stating the declared system.
+fn system_doc(sys: &lower::System, der: &diff::Derived) -> String {
+    let cut = |s: String| {
+        if s.chars().count() > 200 {
+            format!("{} …", s.chars().take(200).collect::<String>())
+        } else {
+            s
+        }
+    };
+    let mut doc = format!(
+        "\n\n# Declared system\n\nd = {}, m = {}, constraint kind: {:?}, separable: {}.\n\n- H = `{}`",
+        sys.dof,
+        sys.constraints.len(),
+        der.kind,
+        der.separable,
+        cut(sys.graph.display(sys.hamiltonian))
+    );
+    for c in sys.constraints.iter().take(8) {
+        doc.push_str(&format!(
+            "\n- {} = `{}`",
+            c.name,
+            cut(sys.graph.display(c.node))
+        ));
+    }
+    if sys.constraints.len() > 8 {
+        doc.push_str(&format!(
+            "\n- … ({} constraints in all)",
+            sys.constraints.len()
+        ));
+    }
+    doc
 }

@@ -1,0 +1,217 @@
+//! Common-subexpression elimination and straight-line code for one method.
+//!
+//! Hash-consing already made every shared subexpression one node, so CSE is
+//! a schedule: starting from the outputs a method needs, collect the nodes
+//! they reach and emit each once, by increasing id (a topological order, by
+//! the graph's invariant), as `let tN = ...;`. Leaves (state entries,
+//! parameters, λ, constants) are written inline. Nodes no output reaches are
+//! never emitted, so a method pays only for what it returns.
+
+use crate::symbolic::{Graph, Node, NodeId};
+use proc_macro2::{Ident, Literal, Span, TokenStream};
+use quote::{format_ident, quote};
+use std::collections::BTreeSet;
+
+/// Straight-line code for a set of roots.
+pub struct Block {
+    /// The `let` statements, in order.
+    pub lets: TokenStream,
+    /// The value of each root, as an expression over the lets.
+    pub values: Vec<TokenStream>,
+    pub uses_q: bool,
+    pub uses_p: bool,
+    pub uses_lambda: bool,
+}
+
+pub struct Coder<'a> {
+    pub graph: &'a Graph,
+    pub dof: usize,
+    pub params: &'a [Ident],
+}
+
+fn lit(x: f64) -> TokenStream {
+    if x.is_nan() {
+        quote!(::core::f64::NAN)
+    } else if x.is_infinite() {
+        if x > 0.0 {
+            quote!(::core::f64::INFINITY)
+        } else {
+            quote!(::core::f64::NEG_INFINITY)
+        }
+    } else if x < 0.0 {
+        let l = Literal::f64_suffixed(-x);
+        quote!((-#l))
+    } else {
+        let l = Literal::f64_suffixed(x);
+        quote!(#l)
+    }
+}
+
+/// `a * b * c` (quote's repetition cannot use `*` as a separator).
+fn product(factors: Vec<TokenStream>) -> TokenStream {
+    let mut it = factors.into_iter();
+    let mut e = it.next().unwrap_or_else(|| quote!(1.0f64));
+    for f in it {
+        e = quote!(#e * #f);
+    }
+    e
+}
+
+fn idx(k: usize) -> Literal {
+    Literal::usize_unsuffixed(k)
+}
+
+impl Coder<'_> {
+    fn is_leaf(&self, id: NodeId) -> bool {
+        matches!(
+            self.graph.node(id),
+            Node::Const(_) | Node::Var(_) | Node::Param(_) | Node::Lambda(_)
+        )
+    }
+
+    /// The nodes the emitted expression of `id` refers to. A product writes
+    /// its negative powers as a denominator, so it refers to their bases.
+    fn deps(&self, id: NodeId) -> Vec<NodeId> {
+        match self.graph.node(id) {
+            Node::Mul(fs) => fs
+                .iter()
+                .map(|f| match self.graph.node(*f) {
+                    Node::Pow(b, n) if *n < 0 => *b,
+                    _ => *f,
+                })
+                .collect(),
+            n => n.children().to_vec(),
+        }
+    }
+
+    /// A reference to the value of `id`: a leaf inline, else its `let`.
+    pub fn atom(&self, id: NodeId) -> TokenStream {
+        match self.graph.node(id) {
+            Node::Const(b) => lit(f64::from_bits(*b)),
+            Node::Var(v) => {
+                let k = v.index();
+                if k < self.dof {
+                    let i = idx(k);
+                    quote!(q[#i])
+                } else {
+                    let i = idx(k - self.dof);
+                    quote!(p[#i])
+                }
+            }
+            Node::Param(p) => {
+                let name = &self.params[p.0 as usize];
+                quote!(self.#name)
+            }
+            Node::Lambda(i) => {
+                let i = idx(*i as usize);
+                quote!(lambda[#i])
+            }
+            _ => {
+                let t = format_ident!("t{}", id.index(), span = Span::call_site());
+                quote!(#t)
+            }
+        }
+    }
+
+    fn power(&self, base: NodeId, n: i32) -> TokenStream {
+        let b = self.atom(base);
+        match n {
+            1 => b,
+            2 => quote!(#b * #b),
+            3 => quote!(#b * #b * #b),
+            n if n < 0 => {
+                let d = self.power(base, -n);
+                quote!(1.0f64 / (#d))
+            }
+            n => quote!(#b.powi(#n)),
+        }
+    }
+
+    /// The defining expression of a non-leaf node.
+    fn expr(&self, id: NodeId) -> TokenStream {
+        match self.graph.node(id) {
+            Node::Add(ts) => {
+                let ts = ts.iter().map(|t| self.atom(*t));
+                quote!(#(#ts)+*)
+            }
+            Node::Mul(fs) => {
+                let mut coef = 1.0;
+                let mut num = Vec::new();
+                let mut den = Vec::new();
+                for f in fs.iter() {
+                    match self.graph.node(*f) {
+                        Node::Const(b) => coef = f64::from_bits(*b),
+                        Node::Pow(b, n) if *n < 0 => den.push(self.power(*b, -n)),
+                        _ => num.push(self.atom(*f)),
+                    }
+                }
+                if coef.abs() != 1.0 || num.is_empty() {
+                    num.insert(0, lit(coef.abs()));
+                }
+                let mut e = product(num);
+                if !den.is_empty() {
+                    let d = product(den);
+                    e = quote!(#e / (#d));
+                }
+                if coef < 0.0 {
+                    quote!(-(#e))
+                } else {
+                    e
+                }
+            }
+            Node::Pow(b, n) => self.power(*b, *n),
+            Node::PowF(b, r) => {
+                let r = f64::from_bits(*r);
+                let b = self.atom(*b);
+                if r == 0.5 {
+                    quote!(#b.sqrt())
+                } else if r == -0.5 {
+                    quote!(1.0f64 / #b.sqrt())
+                } else {
+                    let r = lit(r);
+                    quote!(#b.powf(#r))
+                }
+            }
+            Node::Call(f, x) => {
+                let x = self.atom(*x);
+                let m = Ident::new(f.name(), Span::call_site());
+                quote!(#x.#m())
+            }
+            _ => self.atom(id),
+        }
+    }
+
+    /// Schedules and emits the code computing `roots`.
+    pub fn block(&self, roots: &[NodeId]) -> Block {
+        let mut needed = BTreeSet::new();
+        let mut stack: Vec<NodeId> = roots.to_vec();
+        let (mut uses_q, mut uses_p, mut uses_lambda) = (false, false, false);
+        while let Some(id) = stack.pop() {
+            if !needed.insert(id) {
+                continue;
+            }
+            match self.graph.node(id) {
+                Node::Var(v) if v.index() < self.dof => uses_q = true,
+                Node::Var(_) => uses_p = true,
+                Node::Lambda(_) => uses_lambda = true,
+                _ => stack.extend(self.deps(id)),
+            }
+        }
+        let mut lets = TokenStream::new();
+        for &id in &needed {
+            if self.is_leaf(id) {
+                continue;
+            }
+            let t = self.atom(id);
+            let e = self.expr(id);
+            lets.extend(quote!(let #t: f64 = #e;));
+        }
+        Block {
+            lets,
+            values: roots.iter().map(|r| self.atom(*r)).collect(),
+            uses_q,
+            uses_p,
+            uses_lambda,
+        }
+    }
+}

@@ -1,0 +1,502 @@
+//! The typed view of the macro's input. Every node keeps the span of the
+//! user's tokens, so later stages can point at them.
+//!
+//! The grammar is stated in the doc comment of `constrained_system!`
+//! (`lib.rs`); this module follows it item by item.
+
+use proc_macro2::Span;
+use syn::parse::{Parse, ParseStream};
+use syn::punctuated::Punctuated;
+use syn::{
+    braced, bracketed, parenthesized, token, Attribute, Ident, LitFloat, LitInt, Token, Visibility,
+};
+
+/// The whole declaration.
+pub struct SystemDef {
+    pub attrs: Vec<Attribute>,
+    pub vis: Visibility,
+    pub name: Ident,
+    pub params: Vec<Ident>,
+    pub consts: Vec<(Ident, Expr)>,
+    pub dof: Dof,
+    pub lets: Vec<(Ident, Expr)>,
+    pub hamiltonian: Expr,
+    pub constraints: Vec<ConstraintDecl>,
+}
+
+/// The degrees of freedom.
+pub enum Dof {
+    /// `dof q[d], p[d];`
+    Arrays {
+        q: Ident,
+        p: Ident,
+        dim: Expr,
+        p_dim: Expr,
+    },
+    /// `coordinates x, y; momenta px, py;`
+    Named {
+        coords: Vec<Ident>,
+        momenta: Vec<Ident>,
+    },
+}
+
+/// `name: expr` or `name[k in lo..hi]: expr`.
+pub struct ConstraintDecl {
+    pub name: Ident,
+    pub family: Option<(Ident, Expr, Expr)>,
+    pub expr: Expr,
+}
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Rem,
+    Pow,
+}
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub enum CmpOp {
+    Eq,
+    Ne,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+}
+
+/// A compile-time condition on indices, in `if cond { .. } else { .. }`.
+pub enum Cond {
+    Cmp(CmpOp, Box<Expr>, Box<Expr>),
+    And(Box<Cond>, Box<Cond>),
+    Or(Box<Cond>, Box<Cond>),
+}
+
+/// An expression; `span` is the span of its first token (or of its operator).
+pub struct Expr {
+    pub kind: ExprKind,
+    pub span: Span,
+}
+
+pub enum ExprKind {
+    /// A literal, with `true` when it was written as an integer.
+    Num(f64, bool),
+    Ident(Ident),
+    /// `q[index]`; the span is the bracket's.
+    Index(Ident, Box<Expr>, Span),
+    Neg(Box<Expr>),
+    Binary(BinOp, Box<Expr>, Box<Expr>),
+    Call(Ident, Vec<Expr>),
+    /// `sum i in lo..hi { body }`
+    Sum(Ident, Box<Expr>, Box<Expr>, Box<Expr>),
+    If(Cond, Box<Expr>, Box<Expr>),
+}
+
+fn kw(input: ParseStream, word: &str) -> bool {
+    input.fork().parse::<Ident>().is_ok_and(|i| i == word)
+}
+
+impl Parse for SystemDef {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let attrs = input.call(Attribute::parse_outer)?;
+        let vis: Visibility = input.parse()?;
+        input.parse::<Token![struct]>()?;
+        let name: Ident = input.parse()?;
+        let body;
+        braced!(body in input);
+        if !input.is_empty() {
+            return Err(input.error("unexpected tokens after the system's `{ ... }`"));
+        }
+        let mut params = Vec::new();
+        let mut consts = Vec::new();
+        let mut dof: Option<Dof> = None;
+        let mut coords: Option<(Span, Vec<Ident>)> = None;
+        let mut momenta: Option<(Span, Vec<Ident>)> = None;
+        let mut lets = Vec::new();
+        let mut hamiltonian: Option<Expr> = None;
+        let mut constraints: Option<Vec<ConstraintDecl>> = None;
+        while !body.is_empty() {
+            if body.peek(Token![const]) {
+                body.parse::<Token![const]>()?;
+                let n: Ident = body.parse()?;
+                body.parse::<Token![=]>()?;
+                let e = parse_expr(&body, 0)?;
+                body.parse::<Token![;]>()?;
+                consts.push((n, e));
+            } else if body.peek(Token![let]) {
+                body.parse::<Token![let]>()?;
+                let n: Ident = body.parse()?;
+                body.parse::<Token![=]>()?;
+                let e = parse_expr(&body, 0)?;
+                body.parse::<Token![;]>()?;
+                lets.push((n, e));
+            } else if kw(&body, "parameters") {
+                let k: Ident = body.parse()?;
+                if !params.is_empty() {
+                    return Err(syn::Error::new(k.span(), "`parameters` is declared twice"));
+                }
+                let c;
+                braced!(c in body);
+                params = Punctuated::<Ident, Token![,]>::parse_terminated(&c)?
+                    .into_iter()
+                    .collect();
+                let _ = body.parse::<Option<Token![;]>>()?;
+            } else if kw(&body, "dof") {
+                let k: Ident = body.parse()?;
+                if dof.is_some() || coords.is_some() {
+                    return Err(syn::Error::new(
+                        k.span(),
+                        "the degrees of freedom are declared twice",
+                    ));
+                }
+                let q: Ident = body.parse()?;
+                let c;
+                bracketed!(c in body);
+                let dim = parse_expr(&c, 0)?;
+                body.parse::<Token![,]>()?;
+                let p: Ident = body.parse()?;
+                let c2;
+                bracketed!(c2 in body);
+                let p_dim = parse_expr(&c2, 0)?;
+                body.parse::<Token![;]>()?;
+                dof = Some(Dof::Arrays { q, p, dim, p_dim });
+            } else if kw(&body, "coordinates") || kw(&body, "momenta") {
+                let k: Ident = body.parse()?;
+                let mut names = vec![body.parse::<Ident>()?];
+                while body.peek(Token![,]) {
+                    body.parse::<Token![,]>()?;
+                    if body.peek(Token![;]) {
+                        break;
+                    }
+                    names.push(body.parse()?);
+                }
+                body.parse::<Token![;]>()?;
+                let slot = if k == "coordinates" {
+                    &mut coords
+                } else {
+                    &mut momenta
+                };
+                if slot.is_some() || dof.is_some() {
+                    return Err(syn::Error::new(
+                        k.span(),
+                        "the degrees of freedom are declared twice",
+                    ));
+                }
+                *slot = Some((k.span(), names));
+            } else if kw(&body, "hamiltonian") {
+                let k: Ident = body.parse()?;
+                if hamiltonian.is_some() {
+                    return Err(syn::Error::new(
+                        k.span(),
+                        "the hamiltonian is declared twice",
+                    ));
+                }
+                body.parse::<Token![=]>()?;
+                hamiltonian = Some(parse_expr(&body, 0)?);
+                body.parse::<Token![;]>()?;
+            } else if kw(&body, "constraints") {
+                let k: Ident = body.parse()?;
+                if constraints.is_some() {
+                    return Err(syn::Error::new(k.span(), "`constraints` is declared twice"));
+                }
+                let c;
+                braced!(c in body);
+                constraints = Some(parse_constraints(&c)?);
+                let _ = body.parse::<Option<Token![;]>>()?;
+            } else {
+                return Err(body.error(
+                    "expected one of `parameters { .. }`, `const N = ..;`, `dof q[..], p[..];`, \
+                     `coordinates ..;`, `momenta ..;`, `let name = ..;`, `hamiltonian = ..;`, \
+                     `constraints { .. }`",
+                ));
+            }
+        }
+        let dof = match (dof, coords, momenta) {
+            (Some(d), _, _) => d,
+            (None, Some((_, coords)), Some((span, momenta))) => {
+                if coords.len() != momenta.len() {
+                    return Err(syn::Error::new(
+                        span,
+                        format!(
+                            "{} coordinates but {} momenta: each coordinate needs its conjugate momentum",
+                            coords.len(),
+                            momenta.len()
+                        ),
+                    ));
+                }
+                Dof::Named { coords, momenta }
+            }
+            (None, Some((span, _)), None) => {
+                return Err(syn::Error::new(span, "`coordinates` needs a matching `momenta ..;` line"))
+            }
+            (None, None, Some((span, _))) => {
+                return Err(syn::Error::new(span, "`momenta` needs a matching `coordinates ..;` line"))
+            }
+            (None, None, None) => {
+                return Err(syn::Error::new(
+                    name.span(),
+                    "missing degrees of freedom: add `dof q[d], p[d];` or `coordinates ..; momenta ..;`",
+                ))
+            }
+        };
+        let hamiltonian = hamiltonian
+            .ok_or_else(|| syn::Error::new(name.span(), "missing `hamiltonian = ...;`"))?;
+        Ok(SystemDef {
+            attrs,
+            vis,
+            name,
+            params,
+            consts,
+            dof,
+            lets,
+            hamiltonian,
+            constraints: constraints.unwrap_or_default(),
+        })
+    }
+}
+
+fn parse_constraints(input: ParseStream) -> syn::Result<Vec<ConstraintDecl>> {
+    let mut out = Vec::new();
+    while !input.is_empty() {
+        let name: Ident = input.parse()?;
+        let family = if input.peek(token::Bracket) {
+            let c;
+            bracketed!(c in input);
+            let k: Ident = c.parse()?;
+            c.parse::<Token![in]>()?;
+            let lo = parse_expr(&c, 0)?;
+            c.parse::<Token![..]>()?;
+            let hi = parse_expr(&c, 0)?;
+            if !c.is_empty() {
+                return Err(c.error("expected `]` after the family's range `lo..hi`"));
+            }
+            Some((k, lo, hi))
+        } else {
+            None
+        };
+        input.parse::<Token![:]>()?;
+        let expr = parse_expr(input, 0)?;
+        out.push(ConstraintDecl { name, family, expr });
+        if input.is_empty() {
+            break;
+        }
+        input.parse::<Token![,]>()?;
+    }
+    Ok(out)
+}
+
+const PREC_SUM: u8 = 1;
+const PREC_PRODUCT: u8 = 2;
+const PREC_POWER: u8 = 3;
+
+fn peek_binop(input: ParseStream) -> Option<(BinOp, u8)> {
+    if input.peek(Token![+]) {
+        Some((BinOp::Add, PREC_SUM))
+    } else if input.peek(Token![-]) {
+        Some((BinOp::Sub, PREC_SUM))
+    } else if input.peek(Token![*]) {
+        Some((BinOp::Mul, PREC_PRODUCT))
+    } else if input.peek(Token![/]) {
+        Some((BinOp::Div, PREC_PRODUCT))
+    } else if input.peek(Token![%]) {
+        Some((BinOp::Rem, PREC_PRODUCT))
+    } else if input.peek(Token![^]) {
+        Some((BinOp::Pow, PREC_POWER))
+    } else {
+        None
+    }
+}
+
+/// Precedence climbing: `+ -` < `* / %` < unary `-` < `^` (right-assoc).
+pub fn parse_expr(input: ParseStream, min_prec: u8) -> syn::Result<Expr> {
+    let mut lhs = parse_unary(input)?;
+    while let Some((op, prec)) = peek_binop(input) {
+        if prec < min_prec {
+            break;
+        }
+        let span = input.span();
+        let _: proc_macro2::TokenTree = input.parse()?;
+        let rhs = if op == BinOp::Pow {
+            parse_expr(input, PREC_POWER)?
+        } else {
+            parse_expr(input, prec + 1)?
+        };
+        lhs = Expr {
+            kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
+            span,
+        };
+    }
+    Ok(lhs)
+}
+
+fn parse_unary(input: ParseStream) -> syn::Result<Expr> {
+    if input.peek(Token![-]) {
+        let span = input.span();
+        input.parse::<Token![-]>()?;
+        let e = parse_expr(input, PREC_POWER)?;
+        return Ok(Expr {
+            kind: ExprKind::Neg(Box::new(e)),
+            span,
+        });
+    }
+    parse_primary(input)
+}
+
+fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
+    if input.peek(token::Paren) {
+        let c;
+        parenthesized!(c in input);
+        let e = parse_expr(&c, 0)?;
+        if !c.is_empty() {
+            return Err(c.error("expected `)`"));
+        }
+        return Ok(e);
+    }
+    if input.peek(LitInt) {
+        let l: LitInt = input.parse()?;
+        let v: i64 = l.base10_parse()?;
+        return Ok(Expr {
+            kind: ExprKind::Num(v as f64, true),
+            span,
+        });
+    }
+    if input.peek(LitFloat) {
+        let l: LitFloat = input.parse()?;
+        let v: f64 = l.base10_parse()?;
+        return Ok(Expr {
+            kind: ExprKind::Num(v, false),
+            span,
+        });
+    }
+    if input.peek(Token![if]) {
+        input.parse::<Token![if]>()?;
+        let cond = parse_cond(input)?;
+        let c;
+        braced!(c in input);
+        let then = parse_expr(&c, 0)?;
+        if !c.is_empty() {
+            return Err(c.error("expected `}`"));
+        }
+        input.parse::<Token![else]>()?;
+        let otherwise = if input.peek(Token![if]) {
+            parse_primary(input)?
+        } else {
+            let c;
+            braced!(c in input);
+            let e = parse_expr(&c, 0)?;
+            if !c.is_empty() {
+                return Err(c.error("expected `}`"));
+            }
+            e
+        };
+        return Ok(Expr {
+            kind: ExprKind::If(cond, Box::new(then), Box::new(otherwise)),
+            span,
+        });
+    }
+    if input.peek(syn::Ident) {
+        let id: Ident = input.parse()?;
+        if id == "sum" && input.peek(syn::Ident) && input.peek2(Token![in]) {
+            let var: Ident = input.parse()?;
+            input.parse::<Token![in]>()?;
+            let lo = parse_expr(input, 0)?;
+            input.parse::<Token![..]>()?;
+            let hi = parse_expr(input, 0)?;
+            let c;
+            braced!(c in input);
+            let body = parse_expr(&c, 0)?;
+            if !c.is_empty() {
+                return Err(c.error("expected `}`"));
+            }
+            return Ok(Expr {
+                kind: ExprKind::Sum(var, Box::new(lo), Box::new(hi), Box::new(body)),
+                span,
+            });
+        }
+        if input.peek(token::Bracket) {
+            let c;
+            let b = bracketed!(c in input);
+            let idx = parse_expr(&c, 0)?;
+            if !c.is_empty() {
+                return Err(c.error("expected `]`"));
+            }
+            return Ok(Expr {
+                kind: ExprKind::Index(id, Box::new(idx), b.span.join()),
+                span,
+            });
+        }
+        if input.peek(token::Paren) {
+            let c;
+            parenthesized!(c in input);
+            let mut args = Vec::new();
+            while !c.is_empty() {
+                args.push(parse_expr(&c, 0)?);
+                if c.is_empty() {
+                    break;
+                }
+                c.parse::<Token![,]>()?;
+            }
+            return Ok(Expr {
+                kind: ExprKind::Call(id, args),
+                span,
+            });
+        }
+        return Ok(Expr {
+            kind: ExprKind::Ident(id),
+            span,
+        });
+    }
+    Err(input.error("expected an expression: a number, a name, `q[i]`, `f(x)`, `(..)`, `sum i in a..b { .. }` or `if .. { .. } else { .. }`"))
+}
+
+fn parse_cond(input: ParseStream) -> syn::Result<Cond> {
+    let mut lhs = parse_and(input)?;
+    while input.peek(Token![||]) {
+        input.parse::<Token![||]>()?;
+        let rhs = parse_and(input)?;
+        lhs = Cond::Or(Box::new(lhs), Box::new(rhs));
+    }
+    Ok(lhs)
+}
+
+fn parse_and(input: ParseStream) -> syn::Result<Cond> {
+    let mut lhs = parse_cmp(input)?;
+    while input.peek(Token![&&]) {
+        input.parse::<Token![&&]>()?;
+        let rhs = parse_cmp(input)?;
+        lhs = Cond::And(Box::new(lhs), Box::new(rhs));
+    }
+    Ok(lhs)
+}
+
+fn parse_cmp(input: ParseStream) -> syn::Result<Cond> {
+    let a = parse_expr(input, 0)?;
+    let op = if input.peek(Token![==]) {
+        input.parse::<Token![==]>()?;
+        CmpOp::Eq
+    } else if input.peek(Token![!=]) {
+        input.parse::<Token![!=]>()?;
+        CmpOp::Ne
+    } else if input.peek(Token![<=]) {
+        input.parse::<Token![<=]>()?;
+        CmpOp::Le
+    } else if input.peek(Token![>=]) {
+        input.parse::<Token![>=]>()?;
+        CmpOp::Ge
+    } else if input.peek(Token![<]) {
+        input.parse::<Token![<]>()?;
+        CmpOp::Lt
+    } else if input.peek(Token![>]) {
+        input.parse::<Token![>]>()?;
+        CmpOp::Gt
+    } else {
+        return Err(
+            input.error("expected a comparison (`==`, `!=`, `<`, `<=`, `>`, `>=`) of indices")
+        );
+    };
+    let b = parse_expr(input, 0)?;
+    Ok(Cond::Cmp(op, Box::new(a), Box::new(b)))
+}
