@@ -642,7 +642,18 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
         let opts = self.options.newton;
-        project_constraint(&self.system, q, p, &mut self.ws, &opts)?;
+        if let Err(e) = project_constraint(&self.system, q, p, &mut self.ws, &opts) {
+            // Whatever stopped Gauss–Newton (a singular g_z g_zᵀ, no
+            // convergence), the point could not be brought onto M.
+            let _ = e;
+            self.system.constraints(q, p, &mut self.ws.g);
+            return Err(StepError::NotOnConstraint {
+                step: 0,
+                t: 0.0,
+                residual: norm_inf(&self.ws.g),
+                tolerance: self.options.constraint_tolerance,
+            });
+        }
         project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
         if S::CONSTRAINTS > 0 {
             self.system.constraints(q, p, &mut self.ws.g);

@@ -204,6 +204,9 @@ impl NondegeneracyCheck {
     /// usual κ₁(N); for m = 1 (where κ is always 1) it measures how much N
     /// has shrunk since the start.
     pub(crate) fn condition(&self, reference: f64) -> f64 {
+        if self.inverse_norm.is_infinite() {
+            return f64::INFINITY;
+        }
         self.norm.max(reference) * self.inverse_norm
     }
 }
