@@ -123,6 +123,16 @@ impl Default for NonSeparablePendulum {
     }
 }
 
+impl NonSeparablePendulum {
+    /// q = (sin θ, −cos θ), p = ω(cos θ, sin θ): q·p = 0, a point of M^H.
+    pub fn state_on_mh(&self, theta: f64, omega: f64) -> shake::State {
+        shake::State::from_slices(
+            &[theta.sin(), -theta.cos()],
+            &[omega * theta.cos(), omega * theta.sin()],
+        )
+    }
+}
+
 impl Hamiltonian for NonSeparablePendulum {
     const DOF: usize = 2;
     const SEPARABLE: bool = false;
