@@ -1,0 +1,12 @@
+use shake::constrained_system;
+
+constrained_system! {
+    pub struct Pendulum {
+        parameters { length }
+        dof q[2], p[2];
+        hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+        constraints { rod: q[0]^2 + q[1]^2 - length^2 }
+    }
+}
+
+fn main() {}
