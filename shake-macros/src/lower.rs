@@ -48,6 +48,9 @@ struct Lowerer {
     indices: Vec<(String, i64)>,
 }
 
+/// The largest d accepted: the Hessian outputs are (2d)² arrays.
+const MAX_DOF: usize = 1024;
+
 const FUNCS: &str = "sqrt, sin, cos, tan, exp, ln";
 const NON_DIFFERENTIABLE: &[&str] = &[
     "abs",
@@ -111,8 +114,9 @@ impl Lowerer {
                  `const`s, family and sum indices, `+ - * / %` and parentheses",
             )
         };
+        let overflow = || Error::new(e.span, "integer overflow in an index expression");
         Ok(match &e.kind {
-            ExprKind::Num(v, _) if v.fract() == 0.0 => *v as i64,
+            ExprKind::Num(v, _) if v.fract() == 0.0 && v.abs() < 9e15 => *v as i64,
             ExprKind::Ident(id) => {
                 let name = id.to_string();
                 if let Some(v) = self.lookup_index(&name) {
@@ -130,26 +134,27 @@ impl Lowerer {
                     }
                 }
             }
-            ExprKind::Neg(a) => -self.int(a)?,
+            ExprKind::Neg(a) => self.int(a)?.checked_neg().ok_or_else(overflow)?,
             ExprKind::Binary(op, a, b) => {
                 let (a, b) = (self.int(a)?, self.int(b)?);
-                match op {
-                    BinOp::Add => a + b,
-                    BinOp::Sub => a - b,
-                    BinOp::Mul => a * b,
+                let r = match op {
+                    BinOp::Add => a.checked_add(b),
+                    BinOp::Sub => a.checked_sub(b),
+                    BinOp::Mul => a.checked_mul(b),
                     BinOp::Div | BinOp::Rem if b == 0 => {
                         return Err(Error::new(
                             e.span,
                             "division by zero in an index expression",
                         ))
                     }
-                    BinOp::Div => a / b,
-                    BinOp::Rem => a % b,
+                    BinOp::Div => a.checked_div(b),
+                    BinOp::Rem => a.checked_rem(b),
                     BinOp::Pow => match u32::try_from(b) {
-                        Ok(b) => a.pow(b),
+                        Ok(b) => a.checked_pow(b),
                         Err(_) => return Err(not_int()),
                     },
-                }
+                };
+                r.ok_or_else(overflow)?
             }
             ExprKind::If(c, t, f) => {
                 if self.cond(c)? {
@@ -182,7 +187,7 @@ impl Lowerer {
 
     fn range(&self, lo: &Expr, hi: &Expr) -> Result<std::ops::Range<i64>, Error> {
         let (a, b) = (self.int(lo)?, self.int(hi)?);
-        if b - a > 100_000 {
+        if b.saturating_sub(a) > 100_000 {
             return Err(Error::new(
                 hi.span,
                 "this range is too long (more than 100000 terms)",
@@ -414,9 +419,10 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
                     p_dim.span,
                     format!("`{p}` must have the dimension of `{q}`: {b} ≠ {a}"),
                 )),
-                (Ok(a), Ok(_)) if !(1..=100_000).contains(&a) => {
-                    errors.push(Error::new(dim.span, "the dimension must be at least 1"))
-                }
+                (Ok(a), Ok(_)) if !(1..=MAX_DOF as i64).contains(&a) => errors.push(Error::new(
+                    dim.span,
+                    format!("the dimension must be between 1 and {MAX_DOF}, not {a}"),
+                )),
                 (Ok(a), Ok(_)) => lw.dof = a as usize,
                 (Err(e), _) | (_, Err(e)) => errors.push(e),
             }

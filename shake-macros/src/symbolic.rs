@@ -203,8 +203,11 @@ impl Graph {
             _ if constant => Some(0),
             Node::Var(_) => Some(1),
             Node::Add(c) => c.iter().map(deg).try_fold(0, |a, d| d.map(|d| a.max(d))),
-            Node::Mul(c) => c.iter().map(deg).try_fold(0, |a, d| d.map(|d| a + d)),
-            Node::Pow(x, n) if *n > 0 => self.degree(*x).map(|d| d * (*n as u32)),
+            Node::Mul(c) => c
+                .iter()
+                .map(deg)
+                .try_fold(0u32, |a, d| d.map(|d| a.saturating_add(d))),
+            Node::Pow(x, n) if *n > 0 => self.degree(*x).map(|d| d.saturating_mul(*n as u32)),
             _ => None,
         };
         (support, degree)

@@ -167,3 +167,15 @@ fn expansion_time() {
         assert!(!out.to_string().contains("compile_error"));
     }
 }
+
+/// Prints the expansion of the pendulum (for reading the generated code).
+/// Run with `cargo test -p shake-macros -- --ignored --nocapture print_pendulum`.
+#[test]
+#[ignore]
+fn print_pendulum() {
+    let src = "pub struct Pendulum { parameters { length, gravity } dof q[2], p[2];
+        let r2 = q[0]^2 + q[1]^2;
+        hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+        constraints { rod: r2 - length^2 } }";
+    println!("{}", crate::expand(src.parse().expect("tokens")));
+}
