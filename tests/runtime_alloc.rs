@@ -1,0 +1,99 @@
+//! A step allocates nothing: every buffer lives in the integrator's
+//! workspace. Counted with a global allocator wrapper over many
+//! `step_in_place` calls, for every base map and every kind of fibre flow
+//! (closed form, the runtime's kick, matrix exponential, GBS integration).
+
+mod common;
+
+use common::models::*;
+use shake::{
+    BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet, SymplecticEuler,
+};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    // Per thread: the test harness's other threads allocate now and then.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count() {
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(|c| c.get())
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_per_100_steps<S: ConstrainedSystem + Clone, B: BaseMap>(
+    sys: S,
+    base: B,
+    z0: State,
+) -> usize {
+    let mut integ = Integrator::new(sys, base, 0.01);
+    let mut z = integ.project_to_hidden(&z0).unwrap();
+    integ.step_in_place(&mut z).unwrap();
+    let before = allocations();
+    for _ in 0..100 {
+        integ.step_in_place(&mut z).unwrap();
+    }
+    allocations() - before
+}
+
+fn every_base<S: ConstrainedSystem + Clone>(name: &str, sys: S, z0: State) {
+    let counts = [
+        allocations_per_100_steps(sys.clone(), ImplicitMidpoint, z0.clone()),
+        allocations_per_100_steps(sys.clone(), StormerVerlet, z0.clone()),
+        allocations_per_100_steps(sys, SymplecticEuler, z0),
+    ];
+    assert_eq!(
+        counts,
+        [0, 0, 0],
+        "{name}: allocations in 100 steps (midpoint, SV, Euler)"
+    );
+}
+
+#[test]
+fn steps_do_not_allocate() {
+    let hopf = State::from_slices(
+        &[-0.78652612, -0.4043988],
+        &[-0.3880746864163783, 0.2173391755798215],
+    );
+    every_base(
+        "pendulum",
+        Pendulum::default(),
+        Pendulum::default().state(1.0, 0.5),
+    );
+    every_base(
+        "non-separable",
+        NonSeparablePendulum::default(),
+        NonSeparablePendulum::default().state_on_mh(1.0, 0.5),
+    );
+    every_base(
+        "double, kick",
+        NoClosedForm(DoublePendulum::default()),
+        DoublePendulum::default().state(0.5, 1.0, 0.3, -0.2),
+    );
+    every_base("Hopf", Hopf::gravity(), hopf.clone());
+    every_base("Hopf, expm", NoClosedForm(Hopf::gravity()), hopf.clone());
+    every_base("Hopf, GBS", AsGeneral(Hopf::gravity()), hopf);
+}
