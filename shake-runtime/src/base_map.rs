@@ -4,7 +4,7 @@
 //! SHAKE and RATTLE are built on top of any of them (the paper's Definitions
 //! 1.1 and 1.2). Each base map also provides its *tangent map* Dφ_h(y),
 //! obtained by linearising its stage equations; SHAKE's Newton matrix needs
-//! it (see [`shake`](crate::shake)).
+//! it (see SHAKE in the crate docs).
 //!
 //! - [`ImplicitMidpoint`]: z1 = z0 + h X_H((z0 + z1)/2), for any H;
 //!   symmetric, order 2.

@@ -31,7 +31,13 @@
 //!
 //! # The methods (the paper's Sections 1 and 4)
 //!
-//! - [`shake`]: S_h(z0) = φ_h(exp(Σ λ_i X_{g_i})(z0)) with g(S_h(z0)) = 0.
+//! - SHAKE: S_h(z0) = φ_h(exp(Σ λ_i X_{g_i})(z0)) with g(S_h(z0)) = 0, λ found
+//!   by Newton's method from λ = 0 with the Jacobian
+//!   g_z(z1⁻) · Dφ_h(y) · X_{g_j}(y) (the base map's tangent map; exact when
+//!   the X_{g_i} commute, a simplified Newton otherwise), nested with the base
+//!   map's own stage iteration. λ is the fibre parameter itself: for holonomic
+//!   g and Störmer–Verlet, λ = (h/2) λ_classical of Section 5.1.3. (The
+//!   module is private: `shake::shake` would clash with the facade crate.)
 //! - [`rattle`]: R_h = Π ∘ S_h, Π the projection along the fibre onto M^H.
 //! - [`fibre`]: the fibre flows exp(Σ λ_i X_{g_i}), exact to round-off.
 //! - [`newton`]: every implicit equation is solved to round-off.
@@ -52,7 +58,7 @@ pub mod integrator;
 mod linalg;
 pub mod newton;
 pub mod rattle;
-pub mod shake;
+mod shake;
 mod state;
 pub mod system;
 mod unconstrained;
