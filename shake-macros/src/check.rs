@@ -129,14 +129,13 @@ fn dependence(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
     if m < 2 {
         return;
     }
-    let points = s.points_on_m(sys, der).to_vec();
-    if points.is_empty() {
-        return;
-    }
     let n2 = 2 * sys.dof;
     let mut worst: Option<(usize, usize)> = None; // (rank, first deficient row)
-    for z in &points {
-        let vals = s.eval(&sys.graph, z);
+    for i in 0..SAMPLES {
+        let Some(z) = s.m_point(sys, der, i) else {
+            break;
+        };
+        let vals = s.eval(&sys.graph, &z);
         let mut a = vec![0.0; m * n2];
         for &((i, k), node) in &der.g_z {
             a[i * n2 + k] = vals[node.index()];
@@ -199,7 +198,7 @@ fn coisotropy(cx: &mut Ctxt, sys: &mut System, der: &Derived, s: &mut Sampler) {
     if pending.is_empty() {
         return;
     }
-    let points = s.points_on_m(sys, der).to_vec();
+    let points: Vec<Vec<f64>> = (0..SAMPLES).map_while(|i| s.m_point(sys, der, i)).collect();
     for (i, j, b) in pending {
         let (ni, nj) = (&sys.constraints[i].name, &sys.constraints[j].name);
         let shown = short(sys.graph.display(b));
@@ -305,16 +304,24 @@ fn nondegeneracy(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
     if symbolic {
         return;
     }
-    let points = s.points_on_mh(sys, der).to_vec();
-    if points.len() < 2 {
-        return;
-    }
-    for z in &points {
-        let vals = s.eval(&sys.graph, z);
+    // Stop at the first point of M^H where N has full rank.
+    let mut found = 0;
+    for i in 0..SAMPLES {
+        let Some(zm) = s.m_point(sys, der, i) else {
+            break;
+        };
+        let Some(z) = s.project_mh(sys, der, zm) else {
+            continue;
+        };
+        found += 1;
+        let vals = s.eval(&sys.graph, &z);
         let a: Vec<f64> = der.n.iter().flatten().map(|n| vals[n.index()]).collect();
         if rank_rows(&a, m, m).0 == m {
             return;
         }
+    }
+    if found < 2 {
+        return;
     }
     cx.error(
         sys.constraints[0].span,
@@ -322,7 +329,7 @@ fn nondegeneracy(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
             "the nondegeneracy assumption fails: N_ij = {{{{H,g_i}},g_j}} is singular at every one of {} \
              sampled points of the hidden constraint manifold M^H, so the multipliers of SHAKE and RATTLE \
              are not determined (the paper's Assumption 1.1; see the failing examples of Section 5.2)",
-            points.len()
+            found
         ),
     );
 }
@@ -369,8 +376,8 @@ pub struct Sampler {
     params: Vec<f64>,
     lambda: Vec<f64>,
     rng: u64,
-    on_m: Option<Vec<Vec<f64>>>,
-    on_mh: Option<Vec<Vec<f64>>>,
+    on_m: Vec<Vec<f64>>,
+    attempts: usize,
     n2: usize,
 }
 
@@ -380,8 +387,8 @@ impl Sampler {
             params: Vec::new(),
             lambda: vec![0.0; der.g.len()],
             rng: 0x5eed_5a4b_e000_0001,
-            on_m: None,
-            on_mh: None,
+            on_m: Vec::new(),
+            attempts: 0,
             n2: 2 * sys.dof,
         };
         s.params = (0..sys.params.len()).map(|_| 0.5 + s.uniform()).collect();
@@ -406,45 +413,30 @@ impl Sampler {
         (0..self.n2).map(|_| 2.0 * self.uniform() - 1.0).collect()
     }
 
-    pub fn points_on_m(&mut self, sys: &System, der: &Derived) -> &[Vec<f64>] {
-        if self.on_m.is_none() {
-            let rows: Vec<NodeId> = der.g.clone();
-            let jac: Vec<((usize, usize), NodeId)> = der.g_z.clone();
-            let mut pts = Vec::new();
-            for _ in 0..SAMPLES * 3 {
-                if pts.len() == SAMPLES {
-                    break;
-                }
-                let start = self.random_point();
-                if let Some(z) = self.project(&sys.graph, &rows, &jac, start) {
-                    pts.push(z);
-                }
+    /// The i-th sampled point of M (computed on first use), `None` when
+    /// fewer than i + 1 points could be found.
+    pub fn m_point(&mut self, sys: &System, der: &Derived, i: usize) -> Option<Vec<f64>> {
+        while self.on_m.len() <= i && self.attempts < SAMPLES * 3 {
+            self.attempts += 1;
+            let start = self.random_point();
+            if let Some(z) = self.project(&sys.graph, &der.g, &der.g_z, start) {
+                self.on_m.push(z);
             }
-            self.on_m = Some(pts);
         }
-        self.on_m.as_deref().unwrap_or_default()
+        self.on_m.get(i).cloned()
     }
 
-    pub fn points_on_mh(&mut self, sys: &System, der: &Derived) -> &[Vec<f64>] {
-        if self.on_mh.is_none() {
-            let m = der.g.len();
-            let rows: Vec<NodeId> = der.g.iter().chain(&der.hidden).copied().collect();
-            let jac: Vec<((usize, usize), NodeId)> = der
-                .g_z
-                .iter()
-                .copied()
-                .chain(der.hidden_z.iter().map(|&((i, k), n)| ((i + m, k), n)))
-                .collect();
-            let starts = self.points_on_m(sys, der).to_vec();
-            let mut pts = Vec::new();
-            for z in starts {
-                if let Some(z) = self.project(&sys.graph, &rows, &jac, z) {
-                    pts.push(z);
-                }
-            }
-            self.on_mh = Some(pts);
-        }
-        self.on_mh.as_deref().unwrap_or_default()
+    /// Projects a point of M onto M^H = {g = 0, {g_i,H} = 0}.
+    pub fn project_mh(&self, sys: &System, der: &Derived, z: Vec<f64>) -> Option<Vec<f64>> {
+        let m = der.g.len();
+        let rows: Vec<NodeId> = der.g.iter().chain(&der.hidden).copied().collect();
+        let jac: Vec<((usize, usize), NodeId)> = der
+            .g_z
+            .iter()
+            .copied()
+            .chain(der.hidden_z.iter().map(|&((i, k), n)| ((i + m, k), n)))
+            .collect();
+        self.project(&sys.graph, &rows, &jac, z)
     }
 
     /// Newton projection onto {F = 0}; `None` if it does not converge.
@@ -456,7 +448,6 @@ impl Sampler {
         mut z: Vec<f64>,
     ) -> Option<Vec<f64>> {
         let r = rows.len();
-        let n = self.n2;
         for _ in 0..60 {
             let vals = self.eval(graph, &z);
             let f: Vec<f64> = rows.iter().map(|x| vals[x.index()]).collect();
@@ -468,15 +459,19 @@ impl Sampler {
             if res <= 1e-12 * scale {
                 return Some(z);
             }
-            // J (r×n, dense row-major) and JJᵀ y = F.
-            let mut j = vec![0.0; r * n];
+            // J as sparse rows (a chain's rows have four entries), then
+            // JJᵀ y = F and z ← z − Jᵀy.
+            let mut j: Vec<Vec<(usize, f64)>> = vec![Vec::new(); r];
             for &((i, k), node) in jac {
-                j[i * n + k] = vals[node.index()];
+                j[i].push((k, vals[node.index()]));
+            }
+            for row in &mut j {
+                row.sort_unstable_by_key(|e| e.0);
             }
             let mut jjt = vec![0.0; r * r];
             for a in 0..r {
                 for b in a..r {
-                    let s: f64 = (0..n).map(|k| j[a * n + k] * j[b * n + k]).sum();
+                    let s = sparse_dot(&j[a], &j[b]);
                     jjt[a * r + b] = s;
                     jjt[b * r + a] = s;
                 }
@@ -486,13 +481,31 @@ impl Sampler {
                 jjt[a * r + a] += 1e-13 * trace;
             }
             let y = solve(jjt, f, r)?;
-            for k in 0..n {
-                let step: f64 = (0..r).map(|a| j[a * n + k] * y[a]).sum();
-                z[k] -= step;
+            for (row, ya) in j.iter().zip(&y) {
+                for &(k, v) in row {
+                    z[k] -= v * ya;
+                }
             }
         }
         None
     }
+}
+
+/// The dot product of two sparse rows sorted by column.
+fn sparse_dot(a: &[(usize, f64)], b: &[(usize, f64)]) -> f64 {
+    let (mut i, mut j, mut s) = (0, 0, 0.0);
+    while i < a.len() && j < b.len() {
+        match a[i].0.cmp(&b[j].0) {
+            std::cmp::Ordering::Less => i += 1,
+            std::cmp::Ordering::Greater => j += 1,
+            std::cmp::Ordering::Equal => {
+                s += a[i].1 * b[j].1;
+                i += 1;
+                j += 1;
+            }
+        }
+    }
+    s
 }
 
 /// Solves the r×r system A x = b (row-major) by Gaussian elimination with
