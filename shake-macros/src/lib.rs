@@ -1,10 +1,10 @@
 //! The `constrained_system!` macro of `shake`.
 //!
-//! The expansion reads top-down: [`parse`] the declaration into a typed view
-//! that keeps the user's spans, [`lower`] it into the hash-consed expression
-//! graph of [`symbolic`] (kept canonical by [`simplify`]), differentiate it
-//! ([`diff`]), [`check`] the paper's assumptions, then [`emit`] straight-line
-//! code, scheduled by [`cse`].
+//! The expansion reads top-down: `parse` the declaration into a typed view
+//! that keeps the user's spans, `lower` it into the hash-consed expression
+//! graph of `symbolic` (kept canonical by `simplify`), differentiate it
+//! (`diff`), `check` the paper's assumptions, then `emit` straight-line code,
+//! scheduled by `cse`. See [`constrained_system!`] for the grammar.
 
 mod check;
 mod cse;

@@ -179,3 +179,38 @@ fn print_pendulum() {
         constraints { rod: r2 - length^2 } }";
     println!("{}", crate::expand(src.parse().expect("tokens")));
 }
+
+/// Bad input is a compile error, never a panic of the macro.
+#[test]
+fn bad_input_never_panics() {
+    let cases = [
+        "",
+        "struct",
+        "pub struct S {}",
+        "struct S { dof q[0], p[0]; hamiltonian = 1; }",
+        "struct S { dof q[99999999999999999999], p[1]; hamiltonian = 1; }",
+        "struct S { const N = 9223372036854775807; dof q[N+1], p[N+1]; hamiltonian = q[0]; }",
+        "struct S { dof q[1], p[1]; hamiltonian = q[2^70]; }",
+        "struct S { dof q[1], p[1]; hamiltonian = q[-1]; }",
+        "struct S { dof q[1], p[1]; hamiltonian = q[0.5]; }",
+        "struct S { dof q[1], p[1]; hamiltonian = q[0]^1e400; }",
+        "struct S { dof q[1], p[1]; hamiltonian = ln(0) * q[0]; }",
+        "struct S { dof q[1], p[1]; hamiltonian = q[0]^2147483647 * q[0]^2147483647; }",
+        "struct S { dof q[1], p[1]; hamiltonian = (q[0] + p[0])^100; }",
+        "struct S { dof q[1], p[1]; hamiltonian = sum i in 5..0 { q[i] }; }",
+        "struct S { dof q[2], p[2]; hamiltonian = p[0]^2; constraints { c[k in 0..0]: q[k] } }",
+        "struct S { dof q[2], p[2]; hamiltonian = p[0]^2 + p[1]^2; constraints { c: q[if 1 == 1 { 0 } else { 9 }] } }",
+        "struct S { dof q[1], p[1]; hamiltonian = sqrt(-1) + q[0]; constraints { c: q[0] - sqrt(-1) } }",
+        "struct S { coordinates x; momenta; hamiltonian = x; }",
+        "struct S { dof q[1], p[1]; hamiltonian = 1 / 0; }",
+        "struct S { dof q[1], p[1]; hamiltonian = q[0] % 2; }",
+        "struct S { dof q[1], p[1]; hamiltonian = sin(q[0], p[0]); }",
+        "struct S { dof q[1], p[1]; hamiltonian = q; }",
+        "struct S { dof q[1], p[1]; hamiltonian = p[0]^2; constraints { c: exp(q[0]*1000) } }",
+    ];
+    for src in cases {
+        let tokens: proc_macro2::TokenStream = src.parse().expect("tokens");
+        let out = std::panic::catch_unwind(|| crate::expand(tokens).to_string());
+        assert!(out.is_ok(), "the macro panicked on: {src}");
+    }
+}
