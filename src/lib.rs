@@ -8,6 +8,12 @@
 //! `shake-macros`) declares a system and generates its derivatives at compile
 //! time; [`runtime`] (`shake-runtime`) integrates it.
 
+// Generated code names `::shake::...`; this lets the facade declare systems
+// (the `models` below) with the macro too.
+extern crate self as shake;
+
+pub mod models;
+
 pub use shake_macros::constrained_system;
 pub use shake_runtime as runtime;
 pub use shake_runtime::*;
