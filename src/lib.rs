@@ -1,12 +1,9 @@
-//! # shake
-//!
-//! Geometric SHAKE and RATTLE (McLachlan, Modin, Verdier, Wilkins, *Geometric
-//! generalisations of SHAKE and RATTLE*) for Hamiltonian systems with
-//! holonomic or momentum-dependent (coisotropic) constraints.
-//!
 //! This facade re-exports the two crates: [`constrained_system!`] (from
 //! `shake-macros`) declares a system and generates its derivatives at compile
-//! time; [`runtime`] (`shake-runtime`) integrates it.
+//! time; [`runtime`] (`shake-runtime`) integrates it. The README below is
+//! the crate's front page, and its example is compiled and run as a doctest.
+//!
+#![doc = include_str!("../README.md")]
 
 // Generated code names `::shake::...`; this lets the facade declare systems
 // (the `models` below) with the macro too.
