@@ -10,6 +10,7 @@
 //! ```
 
 use crate::base_map::BaseMap;
+use crate::composition::Composition;
 use crate::diagnostics::{Accumulator, DiagnosticRecord};
 use crate::error::{Stage, StepError};
 use crate::linalg::norm_inf;
@@ -227,6 +228,7 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     base: B,
     h: f64,
     method: Method,
+    composition: Composition,
     options: Options,
     diagnostics: bool,
     ws: Workspace,
@@ -255,6 +257,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             base,
             h,
             method: Method::Rattle,
+            composition: Composition::SINGLE,
             options: Options::default(),
             diagnostics: false,
             ws,
@@ -297,6 +300,51 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     pub fn with_method(mut self, method: Method) -> Self {
         self.method = method;
         self
+    }
+
+    /// Take each step as the symmetric composition `c` of RATTLE (or SHAKE)
+    /// substeps γ_k h, raising the order to `c.order()` over a symmetric
+    /// base map (see [`composition`](crate::composition)).
+    ///
+    /// ```
+    /// use shake_runtime::{Composition, Integrator, ImplicitMidpoint, examples::Pendulum};
+    /// let i = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).composed(Composition::YOSHIDA_6);
+    /// assert_eq!(i.order(), 6);
+    /// assert_eq!(i.composition(), Composition::YOSHIDA_6);
+    /// ```
+    pub fn composed(mut self, c: Composition) -> Self {
+        self.composition = c;
+        self
+    }
+
+    /// The composition scheme of a step ([`Composition::SINGLE`] unless
+    /// [`composed`](Self::composed)).
+    ///
+    /// ```
+    /// use shake_runtime::{Composition, Integrator, StormerVerlet, examples::Pendulum};
+    /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).composition(), Composition::SINGLE);
+    /// ```
+    pub fn composition(&self) -> Composition {
+        self.composition
+    }
+
+    /// The order of a step as an approximation of the exact flow on M^H:
+    /// the base map's order without composition, the composition's order
+    /// over a symmetric base map, and the base map's order otherwise (a
+    /// composition of a non-symmetric method does not raise its order).
+    ///
+    /// ```
+    /// use shake_runtime::{Composition, Integrator, SymplecticEuler, StormerVerlet, examples::Pendulum};
+    /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).order(), 2);
+    /// let euler = Integrator::new(Pendulum::default(), SymplecticEuler, 0.1).composed(Composition::TRIPLE_JUMP);
+    /// assert_eq!(euler.order(), 1);
+    /// ```
+    pub fn order(&self) -> u32 {
+        if self.composition.stages() == 1 || !B::SYMMETRIC {
+            B::ORDER
+        } else {
+            self.composition.order()
+        }
     }
 
     /// Replace the options.
@@ -465,9 +513,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         Ok(())
     }
 
-    /// One step from (q, p), in place: SHAKE, then (if `project`) Π, then
-    /// the checks. `step` is the index of the new state, `t` the time at the
-    /// start of the step.
+    /// One step from (q, p), in place: the substeps γ_k h of the
+    /// composition (one substep of size h without one), each a SHAKE step,
+    /// projected onto M^H unless it is the last one and `project` is false,
+    /// and each checked. `step` is the index of the new state, `t` the time
+    /// at the start of the step. Iteration counts are summed over the
+    /// substeps, ‖λ‖ and the condition of N are the largest.
     fn advance(
         &mut self,
         q: &mut [f64],
@@ -476,11 +527,40 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         step: u64,
         t: f64,
     ) -> Result<StepInfo, StepError> {
+        let gammas = self.composition.coefficients();
+        if gammas.len() == 1 {
+            return self.substep(q, p, self.h, project, step, t);
+        }
+        let last = gammas.len() - 1;
+        let mut total = StepInfo::default();
+        for (k, &gamma) in gammas.iter().enumerate() {
+            let info = self.substep(q, p, gamma * self.h, project || k < last, step, t)?;
+            total.shake_iterations += info.shake_iterations;
+            total.base_iterations += info.base_iterations;
+            total.rattle_iterations += info.rattle_iterations;
+            total.lambda = total.lambda.max(info.lambda);
+            total.condition = total.condition.max(info.condition);
+            total.det_n = info.det_n;
+        }
+        Ok(total)
+    }
+
+    /// One SHAKE step of size `h` from (q, p), in place, then (if
+    /// `project`) Π, then the checks.
+    fn substep(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        h: f64,
+        project: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<StepInfo, StepError> {
         let opts = self.options;
         let report = shake_step(
             &self.system,
             &self.base,
-            self.h,
+            h,
             q,
             p,
             &mut self.ws,
@@ -533,7 +613,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         self.det_prev = nd.det;
         if report.lambda_correction
-            > opts.jump_ratio * report.lambda_predicted + 1e-8 * self.h.abs()
+            > opts.jump_ratio * report.lambda_predicted + 1e-8 * h.abs()
         {
             return Err(StepError::FibreJump {
                 step,

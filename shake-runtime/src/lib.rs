@@ -50,6 +50,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod base_map;
+pub mod composition;
 pub mod diagnostics;
 pub mod error;
 pub mod examples;
@@ -64,6 +65,7 @@ pub mod system;
 mod unconstrained;
 
 pub use base_map::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
+pub use composition::Composition;
 pub use diagnostics::DiagnosticRecord;
 pub use error::{SolveError, Stage, StepError};
 pub use fibre::FibreFlow;
