@@ -149,19 +149,22 @@ pub enum StepError {
         /// det N now.
         det_after: f64,
     },
-    /// SHAKE's Newton converged to a fibre displacement λ far from its own
-    /// first (linear) prediction: the solution it found is not the nearby
-    /// one of order h but another intersection of the fibre with the
-    /// modified hidden constraint set.
-    #[error("fibre jump at step {step}, t = {t}: |λ| = {lambda:.3e} but the linear prediction was {predicted:.3e}")]
+    /// A Newton iteration along the fibre converged to a displacement far
+    /// from its own first (linear) prediction: SHAKE's λ (the solution found
+    /// is not the nearby one of order h but another intersection of the
+    /// fibre with the modified hidden constraint set), or the projection's σ
+    /// (Π landed on another crossing of the fibre with M^H).
+    #[error("fibre jump in {stage} at step {step}, t = {t}: the fibre displacement is {lambda:.3e} but its linear prediction was {predicted:.3e}: Newton left the nearby point of M and M^H, which signals a fold or another component of M^H (Section 5.4.2)")]
     FibreJump {
+        /// Where: SHAKE's λ or the projection's σ.
+        stage: Stage,
         /// Step index.
         step: u64,
         /// Time.
         t: f64,
-        /// ‖λ‖∞ found.
+        /// ‖λ‖∞ (or ‖σ‖∞) found.
         lambda: f64,
-        /// ‖λ₁‖∞ of the first Newton iterate.
+        /// ‖λ₁‖∞ (or ‖σ₁‖∞) of the first Newton iterate.
         predicted: f64,
     },
     /// The state handed to SHAKE/RATTLE is not on M = {g = 0} (or, for

@@ -63,8 +63,11 @@ pub struct Options {
     /// converged λ differs from it by O(h)·‖λ₁‖ when the solution is the
     /// nearby one; the step fails with [`StepError::FibreJump`] when
     /// ‖λ − λ₁‖∞ > `jump_ratio` · ‖λ₁‖∞ + 1e-8·|h| (default 1: the
-    /// correction is as large as the prediction itself). `f64::INFINITY`
-    /// turns the check off.
+    /// correction is as large as the prediction itself). The projection Π
+    /// onto M^H is held to the same test with its σ, wherever a run
+    /// projects (every step, or only the stored states): near a fold of
+    /// M^H (Section 5.4.2, case iii) it is Π that would otherwise land on
+    /// another crossing of the fibre. `f64::INFINITY` turns the check off.
     pub jump_ratio: f64,
     /// Check after every step that det N kept its sign
     /// ([`StepError::ComponentJump`]) (default true).
@@ -73,6 +76,32 @@ pub struct Options {
     /// at the states that are stored or observed (default false; both give
     /// the same states to round-off, by Π ∘ S_hᵏ = Π ∘ R_hᵏ).
     pub project_every_step: bool,
+}
+
+impl Options {
+    /// The fibre-jump test shared by SHAKE's λ and the projection's σ: the
+    /// Newton correction beyond the first (linear) iterate must stay below
+    /// `jump_ratio` times that prediction (plus 1e-8·|h| so that a step
+    /// starting exactly on M^H, where the prediction is 0, passes).
+    fn check_jump(
+        &self,
+        stage: Stage,
+        correction: f64,
+        predicted: f64,
+        found: f64,
+        h: f64,
+    ) -> Result<(), StepError> {
+        if correction > self.jump_ratio * predicted + 1e-8 * h.abs() {
+            return Err(StepError::FibreJump {
+                stage,
+                step: 0,
+                t: 0.0,
+                lambda: found,
+                predicted,
+            });
+        }
+        Ok(())
+    }
 }
 
 impl Default for Options {
@@ -577,6 +606,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             let pr = project_hidden(&self.system, q, p, &mut self.ws, &opts.newton)
                 .map_err(|e| e.at(step, t))?;
             info.rattle_iterations = pr.iterations;
+            opts.check_jump(
+                Stage::Rattle,
+                pr.correction,
+                pr.predicted,
+                pr.displacement,
+                h,
+            )
+            .map_err(|e| e.at(step, t))?;
         }
         if !q.iter().chain(p.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFinite {
@@ -612,16 +649,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         self.det_prev = nd.det;
-        if report.lambda_correction
-            > opts.jump_ratio * report.lambda_predicted + 1e-8 * h.abs()
-        {
-            return Err(StepError::FibreJump {
-                step,
-                t,
-                lambda: report.lambda,
-                predicted: report.lambda_predicted,
-            });
-        }
+        opts.check_jump(
+            Stage::Shake,
+            report.lambda_correction,
+            report.lambda_predicted,
+            report.lambda,
+            h,
+        )
+        .map_err(|e| e.at(step, t))?;
         Ok(info)
     }
 
@@ -822,6 +857,34 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             )
             .map_err(|e| e.at(k, t))?;
             rattle_iterations = pr.iterations;
+            // The stored state is the projection of the SHAKE state z⁻ of
+            // this step: it must be the nearby crossing of the fibre with
+            // M^H, on the component the run is on.
+            self.options
+                .check_jump(
+                    Stage::Rattle,
+                    pr.correction,
+                    pr.predicted,
+                    pr.displacement,
+                    self.h,
+                )
+                .map_err(|e| e.at(k, t))?;
+            if self.options.check_component && S::CONSTRAINTS > 0 {
+                let nd = check_nondegeneracy(
+                    &self.system,
+                    scratch.q.as_slice(),
+                    scratch.p.as_slice(),
+                    &mut self.ws,
+                );
+                if self.det_prev.is_finite() && nd.det.signum() != self.det_prev.signum() {
+                    return Err(StepError::ComponentJump {
+                        step: k,
+                        t,
+                        det_before: self.det_prev,
+                        det_after: nd.det,
+                    });
+                }
+            }
         }
         if self.diagnostics {
             let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());

@@ -37,6 +37,14 @@ pub(crate) struct ProjectionReport {
     pub(crate) iterations: usize,
     /// ‖σ‖∞ (or ‖Δz‖∞ for the projection onto M).
     pub(crate) displacement: f64,
+    /// ‖σ₁‖∞: the first Newton iterate, the linear prediction
+    /// N⁻¹{g,H} of the fibre displacement (projection onto M^H only).
+    pub(crate) predicted: f64,
+    /// An upper bound of ‖σ − σ₁‖∞: the sum of the later updates' norms.
+    /// Small against `predicted` when Π lands on the nearby point of M^H; as
+    /// large as it or larger when Newton has wandered to another crossing of
+    /// the fibre with M^H (another component, Section 5.4.2).
+    pub(crate) correction: f64,
 }
 
 /// Π: moves (q, p) ∈ M along its fibre onto M^H, in place.
@@ -56,6 +64,7 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
     ws.sigma.fill(0.0);
     let mut mon = Monitor::new(*opts);
     let mut converged = false;
+    let (mut predicted, mut correction) = (0.0f64, 0.0f64);
     loop {
         ws.z1.copy_from_slice(&ws.y);
         {
@@ -101,13 +110,21 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
         for (s, ds) in ws.sigma.iter_mut().zip(&ws.delta) {
             *s += ds;
         }
-        converged = mon.update(norm_inf(&ws.delta), norm_inf(&ws.sigma)) == Verdict::Converged;
+        let step = norm_inf(&ws.delta);
+        if mon.iterations == 0 {
+            predicted = step;
+        } else {
+            correction += step;
+        }
+        converged = mon.update(step, norm_inf(&ws.sigma)) == Verdict::Converged;
     }
     q.copy_from_slice(&ws.z1[..d]);
     p.copy_from_slice(&ws.z1[d..]);
     Ok(ProjectionReport {
         iterations: mon.iterations,
         displacement: norm_inf(&ws.sigma),
+        predicted,
+        correction,
     })
 }
 
@@ -186,6 +203,7 @@ pub(crate) fn project_constraint<S: ConstrainedSystem>(
     Ok(ProjectionReport {
         iterations: mon.iterations,
         displacement: moved,
+        ..ProjectionReport::default()
     })
 }
 
