@@ -123,16 +123,18 @@ impl Claims {
             "| # | claim | measured quantity | measured | bound | why this bound | result |\n\
              |---|---|---|---|---|---|---|\n",
         );
+        // Norms |g| inside a cell would end it: escape the bars.
+        let cell = |t: &str| t.replace('|', "\\|");
         for c in &self.rows {
             let _ = writeln!(
                 s,
                 "| {} | {} | {} | {} | {} | {} | {} |",
                 c.id,
-                c.statement,
-                c.quantity,
+                cell(&c.statement),
+                cell(&c.quantity),
                 num(c.measured),
-                c.bound.show(),
-                c.why,
+                cell(&c.bound.show()),
+                cell(&c.why),
                 if c.passes() { "pass" } else { "**FAIL**" }
             );
         }
