@@ -12,6 +12,32 @@ use proc_macro2::{Ident, Literal, Span, TokenStream};
 use quote::{format_ident, quote};
 use std::collections::BTreeSet;
 
+/// The most `let`s emitted one after the other in one scope.
+///
+/// Every `let` opens a scope nested in the one before, and rustc's debug
+/// info walks those scopes recursively: a few thousand nested `let`s (a
+/// chain of 256 links has about ten thousand temporaries in one method)
+/// overflow the stack of LLVM's DWARF writer (rustc dies with SIGSEGV
+/// whenever debug info is on, as in the dev profile). Longer blocks are
+/// emitted in chunks, `let (t1, t2, …) = { let t1 = …; …; (t1, t2, …) };`,
+/// so scopes nest at most `LET_CHUNK` + (number of chunks) deep; the values
+/// stay SSA values (no arrays in memory), so the optimised code is the same.
+const LET_CHUNK: usize = 128;
+
+/// `defs` as chunks of at most [`LET_CHUNK`] `let`s, each a block whose
+/// value is the tuple of its temporaries.
+fn chunked_lets(defs: Vec<(TokenStream, TokenStream)>) -> TokenStream {
+    let mut out = TokenStream::new();
+    for chunk in defs.chunks(LET_CHUNK) {
+        let ts: Vec<&TokenStream> = chunk.iter().map(|(t, _)| t).collect();
+        let es = chunk.iter().map(|(_, e)| e);
+        out.extend(quote! {
+            let (#(#ts,)*) = { #(let #ts: f64 = #es;)* (#(#ts,)*) };
+        });
+    }
+    out
+}
+
 /// Straight-line code for a set of roots.
 pub struct Block {
     /// The `let` statements, in order.
@@ -197,15 +223,17 @@ impl Coder<'_> {
                 _ => stack.extend(self.deps(id)),
             }
         }
-        let mut lets = TokenStream::new();
-        for &id in &needed {
-            if self.is_leaf(id) {
-                continue;
-            }
-            let t = self.atom(id);
-            let e = self.expr(id);
-            lets.extend(quote!(let #t: f64 = #e;));
-        }
+        let defs: Vec<(TokenStream, TokenStream)> = needed
+            .iter()
+            .filter(|id| !self.is_leaf(**id))
+            .map(|&id| (self.atom(id), self.expr(id)))
+            .collect();
+        let lets = if defs.len() <= LET_CHUNK {
+            let (ts, es): (Vec<_>, Vec<_>) = defs.into_iter().unzip();
+            quote!(#(let #ts: f64 = #es;)*)
+        } else {
+            chunked_lets(defs)
+        };
         Block {
             lets,
             values: roots.iter().map(|r| self.atom(*r)).collect(),

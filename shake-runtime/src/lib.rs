@@ -52,6 +52,7 @@
 pub mod base_map;
 pub mod composition;
 pub mod diagnostics;
+pub mod ensemble;
 pub mod error;
 pub mod examples;
 pub mod fibre;
@@ -67,11 +68,14 @@ mod unconstrained;
 pub use base_map::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
 pub use composition::Composition;
 pub use diagnostics::DiagnosticRecord;
+pub use ensemble::{ensemble, run_ensemble};
 pub use error::{SolveError, Stage, StepError};
 pub use fibre::FibreFlow;
 pub use integrator::{Integrator, Method, Options, Run, RunOutcome, StepInfo, Stop, Trajectory};
 pub use nalgebra;
 pub use newton::NewtonOptions;
+/// Re-exported for [`ensemble`]: its thread pools.
+pub use rayon;
 pub use state::State;
 pub use system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 pub use unconstrained::Unconstrained;

@@ -1,21 +1,221 @@
-//! Small dense linear algebra on workspace slices, without allocation.
+//! Small dense and banded linear algebra on workspace slices, without
+//! allocation.
 //!
 //! This is the seam behind which every linear solve of the runtime happens
 //! (the m×m Newton matrices of SHAKE and RATTLE, the 2d×2d and d×d stage
 //! matrices of the implicit base maps). Everything works in place on
 //! column-major slices (entry (i, j) at `a[i + j*n]`) with partial pivoting.
-//! A structured (banded) solve for long chains can replace [`lu_factor`] /
-//! [`lu_solve`] here without touching the methods.
+//!
+//! # Banded matrices
+//!
+//! The Newton matrices of a chain are banded: constraint i couples only to
+//! its neighbours, so g_z g_zᵀ, N = {{H,g_i},g_j} and SHAKE's Jacobian have a
+//! few diagonals. A dense LU costs n³/3 flops for them; the banded LU of
+//! [`band_lu_factor`] costs about n·l·(l + u) (LAPACK's `dgbtrf` without the
+//! packed storage: the matrix stays in its dense column-major slice, only
+//! the band is touched). [`lu_factor`] picks it by itself when the matrix
+//! is banded and its pivot vector has two spare slots (length ≥ n + 2), in
+//! which it records the bandwidths for [`lu_solve`] and
+//! [`lu_solve_transpose`]; callers that know the band in advance (SHAKE's
+//! structured Jacobian) call the banded functions directly.
 
 /// The matrix was exactly singular (a zero pivot) or not finite.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub(crate) struct Singular;
 
+/// Bandwidths of a square matrix: a_ij = 0 when i > j + lower or
+/// j > i + upper.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Band {
+    pub(crate) lower: usize,
+    pub(crate) upper: usize,
+}
+
+impl Band {
+    /// The band of a full n×n matrix.
+    pub(crate) fn full(n: usize) -> Band {
+        let w = n.saturating_sub(1);
+        Band { lower: w, upper: w }
+    }
+
+    /// The smallest band holding every nonzero entry of `a` (n×n).
+    pub(crate) fn of(a: &[f64], n: usize) -> Band {
+        let mut band = Band { lower: 0, upper: 0 };
+        for j in 0..n {
+            let col = &a[j * n..(j + 1) * n];
+            // The farthest nonzero above and below the diagonal.
+            if let Some(i) = col[..j].iter().position(|v| *v != 0.0) {
+                band.upper = band.upper.max(j - i);
+            }
+            if let Some(i) = col[j + 1..].iter().rposition(|v| *v != 0.0) {
+                band.lower = band.lower.max(i + 1);
+            }
+        }
+        band
+    }
+
+    /// Whether a banded factorisation pays: LU with partial pivoting fills
+    /// U up to lower + upper diagonals, so the band (with its fill) must
+    /// cover well under half of the matrix.
+    pub(crate) fn pays(self, n: usize) -> bool {
+        n >= 12 && 4 * (2 * self.lower + self.upper + 1) <= n
+    }
+}
+
+/// The band recorded by [`lu_factor`] in the spare slots of `piv`, if the
+/// factors are banded.
+fn recorded_band(piv: &[usize], n: usize) -> Option<Band> {
+    if piv.len() >= n + 2 && piv[n + 1] != 0 {
+        Some(Band {
+            lower: piv[n],
+            upper: piv[n + 1] - 1,
+        })
+    } else {
+        None
+    }
+}
+
 /// LU factorisation with partial pivoting, in place: afterwards `a` holds
 /// L (unit lower, below the diagonal) and U, and `piv[k]` is the row swapped
 /// with row k at elimination step k.
+///
+/// When `piv` has two spare slots (length ≥ n + 2) and `a` is banded
+/// narrowly enough ([`Band::pays`]), this is [`band_lu_factor`] and the band
+/// is recorded in `piv[n]`, `piv[n + 1]`; [`lu_solve`],
+/// [`lu_solve_transpose`] and [`lu_det`] read it from there.
 pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     debug_assert!(a.len() >= n * n && piv.len() >= n);
+    if piv.len() >= n + 2 {
+        piv[n + 1] = 0;
+        if n >= 12 {
+            let band = Band::of(a, n);
+            if band.pays(n) {
+                band_lu_factor(a, n, band, piv)?;
+                piv[n] = band.lower;
+                piv[n + 1] = band.upper + 1;
+                return Ok(());
+            }
+        }
+    }
+    dense_lu_factor(a, n, piv)
+}
+
+/// Banded LU with partial pivoting (LAPACK's `dgbtrf`), in place in the
+/// dense column-major slice `a` whose nonzeros lie in `band`. Row
+/// interchanges are applied only to the columns from the pivot column on,
+/// so the multipliers of L stay where they were computed and the solves
+/// interleave them with the interchanges ([`band_lu_solve`]). U gets
+/// `band.lower + band.upper` superdiagonals (the fill of pivoting); entries
+/// outside the band must be zero on entry.
+pub(crate) fn band_lu_factor(
+    a: &mut [f64],
+    n: usize,
+    band: Band,
+    piv: &mut [usize],
+) -> Result<(), Singular> {
+    debug_assert!(a.len() >= n * n && piv.len() >= n);
+    let kl = band.lower;
+    let kv = band.lower + band.upper;
+    for k in 0..n {
+        let last_row = (k + kl).min(n - 1);
+        let last_col = (k + kv).min(n - 1);
+        let mut p = k;
+        let mut max = a[k + k * n].abs();
+        for i in k + 1..=last_row {
+            let v = a[i + k * n].abs();
+            if v > max {
+                max = v;
+                p = i;
+            }
+        }
+        piv[k] = p;
+        if max == 0.0 || !max.is_finite() {
+            return Err(Singular);
+        }
+        if p != k {
+            for j in k..=last_col {
+                a.swap(k + j * n, p + j * n);
+            }
+        }
+        let inv = 1.0 / a[k + k * n];
+        for i in k + 1..=last_row {
+            a[i + k * n] *= inv;
+        }
+        for j in k + 1..=last_col {
+            let akj = a[k + j * n];
+            if akj != 0.0 {
+                for i in k + 1..=last_row {
+                    a[i + j * n] -= a[i + k * n] * akj;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Solves A x = b in place from the factors of [`band_lu_factor`].
+pub(crate) fn band_lu_solve(lu: &[f64], n: usize, band: Band, piv: &[usize], b: &mut [f64]) {
+    let kl = band.lower;
+    let kv = band.lower + band.upper;
+    // b ← L_k⁻¹ P_k b for k = 0, 1, …
+    for k in 0..n {
+        let p = piv[k];
+        if p != k {
+            b.swap(k, p);
+        }
+        let bk = b[k];
+        if bk != 0.0 {
+            for i in k + 1..=(k + kl).min(n - 1) {
+                b[i] -= lu[i + k * n] * bk;
+            }
+        }
+    }
+    // U x = b.
+    for j in (0..n).rev() {
+        b[j] /= lu[j + j * n];
+        let bj = b[j];
+        if bj != 0.0 {
+            for i in j.saturating_sub(kv)..j {
+                b[i] -= lu[i + j * n] * bj;
+            }
+        }
+    }
+}
+
+/// Solves Aᵀ x = b in place from the factors of [`band_lu_factor`]:
+/// A = P₀L₀ ⋯ P_{n−1}L_{n−1} U, so Aᵀ x = b is Uᵀ y = b followed by
+/// y ← P_k L_k⁻ᵀ y for k = n−1, …, 0.
+pub(crate) fn band_lu_solve_transpose(
+    lu: &[f64],
+    n: usize,
+    band: Band,
+    piv: &[usize],
+    b: &mut [f64],
+) {
+    let kl = band.lower;
+    let kv = band.lower + band.upper;
+    for j in 0..n {
+        let mut s = b[j];
+        for i in j.saturating_sub(kv)..j {
+            s -= lu[i + j * n] * b[i];
+        }
+        b[j] = s / lu[j + j * n];
+    }
+    for k in (0..n).rev() {
+        let mut s = b[k];
+        for i in k + 1..=(k + kl).min(n - 1) {
+            s -= lu[i + k * n] * b[i];
+        }
+        b[k] = s;
+        let p = piv[k];
+        if p != k {
+            b.swap(k, p);
+        }
+    }
+}
+
+/// The dense LU of [`lu_factor`] (rows swapped across the whole matrix).
+fn dense_lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     for k in 0..n {
         // Pivot: the largest entry of column k on or below the diagonal.
         let mut p = k;
@@ -54,6 +254,9 @@ pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<()
 
 /// Solves A x = b in place (b becomes x) from the factors of [`lu_factor`].
 pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    if let Some(band) = recorded_band(piv, n) {
+        return band_lu_solve(lu, n, band, piv, b);
+    }
     for k in 0..n {
         b.swap(k, piv[k]);
     }
@@ -80,6 +283,9 @@ pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 /// Solves Aᵀ x = b in place from the factors of [`lu_factor`].
 pub(crate) fn lu_solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    if let Some(band) = recorded_band(piv, n) {
+        return band_lu_solve_transpose(lu, n, band, piv, b);
+    }
     // Aᵀ = Uᵀ Lᵀ P, so solve Uᵀ y = b, Lᵀ w = y, x = Pᵀ w.
     for j in 0..n {
         let mut s = b[j];
@@ -266,6 +472,82 @@ mod tests {
         let est = inverse_norm1_estimate(&lu, 3, &piv, &mut x, &mut z);
         // A⁻¹ = [[1, -1, 2], [-1, 2, -4], [2, -4, 10]]: ‖A⁻¹‖₁ = 16.
         assert!((est - 16.0).abs() < 1e-12, "{est}");
+    }
+
+    /// A random-looking n×n matrix with the given band, diagonally weak so
+    /// that partial pivoting actually swaps rows.
+    fn banded(n: usize, band: Band) -> Vec<f64> {
+        let mut a = vec![0.0; n * n];
+        let mut x = 0.3f64;
+        for j in 0..n {
+            for i in j.saturating_sub(band.upper)..=(j + band.lower).min(n - 1) {
+                x = (x * 3.7 + 0.11).fract();
+                a[i + j * n] = x - 0.5 + if i == j { 0.05 } else { 0.0 };
+            }
+        }
+        a
+    }
+
+    #[test]
+    fn banded_lu_agrees_with_dense_lu() {
+        let n = 40;
+        for band in [
+            Band { lower: 1, upper: 1 },
+            Band { lower: 2, upper: 0 },
+            Band { lower: 0, upper: 3 },
+            Band { lower: 3, upper: 2 },
+        ] {
+            let a0 = banded(n, band);
+            assert_eq!(Band::of(&a0, n), band);
+            let x_true: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+            // b = A x and c = Aᵀ x.
+            let mut b = vec![0.0; n];
+            let mut c = vec![0.0; n];
+            for i in 0..n {
+                for j in 0..n {
+                    b[i] += a0[i + j * n] * x_true[j];
+                    c[i] += a0[j + i * n] * x_true[j];
+                }
+            }
+            let mut dense = a0.clone();
+            let mut piv_d = vec![0; n];
+            lu_factor(&mut dense, n, &mut piv_d).unwrap();
+            let mut lu = a0.clone();
+            let mut piv = vec![0; n + 2];
+            lu_factor(&mut lu, n, &mut piv).unwrap();
+            assert_eq!(recorded_band(&piv, n), Some(band), "auto-detected band");
+            let (mut xb, mut xc) = (b.clone(), c.clone());
+            lu_solve(&lu, n, &piv, &mut xb);
+            lu_solve_transpose(&lu, n, &piv, &mut xc);
+            // Against the dense solves (these random matrices can be badly
+            // conditioned, so x_true itself is only the scale).
+            let (mut db, mut dc) = (b.clone(), c.clone());
+            lu_solve(&dense, n, &piv_d, &mut db);
+            lu_solve_transpose(&dense, n, &piv_d, &mut dc);
+            let scale = norm_inf(&db).max(norm_inf(&dc));
+            for i in 0..n {
+                assert!((xb[i] - db[i]).abs() < 1e-9 * scale, "{band:?} {i}");
+                assert!((xc[i] - dc[i]).abs() < 1e-9 * scale, "{band:?} {i}");
+            }
+            // Residuals of the banded solves.
+            for i in 0..n {
+                let (mut rb, mut rc) = (-b[i], -c[i]);
+                for j in 0..n {
+                    rb += a0[i + j * n] * xb[j];
+                    rc += a0[j + i * n] * xc[j];
+                }
+                assert!(
+                    rb.abs() < 1e-10 * scale && rc.abs() < 1e-10 * scale,
+                    "{band:?} {i}"
+                );
+            }
+            let (dd, db) = (lu_det(&dense, n, &piv_d), lu_det(&lu, n, &piv));
+            assert!((dd - db).abs() <= 1e-10 * dd.abs(), "{dd} {db}");
+            let (mut s1, mut s2) = (vec![0.0; n], vec![0.0; n]);
+            let ed = inverse_norm1_estimate(&dense, n, &piv_d, &mut s1, &mut s2);
+            let eb = inverse_norm1_estimate(&lu, n, &piv, &mut s1, &mut s2);
+            assert!((ed - eb).abs() <= 1e-8 * ed, "{ed} {eb}");
+        }
     }
 
     #[test]

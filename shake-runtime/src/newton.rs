@@ -22,6 +22,21 @@
 //! Newton converges quadratically, so both happen within one or two
 //! iterations of the first one at round-off. If neither happens within
 //! `max_iterations`, the step fails with a typed error carrying the residual.
+//!
+//! # Simplified Newton
+//!
+//! SHAKE keeps its Jacobian from the start of a step (evaluated at λ = 0)
+//! instead of evaluating it at every iterate: a *simplified* Newton method.
+//! It converges linearly, with a ratio of the order of the Jacobian's
+//! change over the step (O(‖λ‖) = O(h)) — in practice one or two more
+//! iterations, each far cheaper. Its stopping rule
+//! ([`Monitor::update_frozen`]) is the one above with one change: while
+//! the Jacobian is stale, an update that did not at least quarter the
+//! previous one is taken for stagnation only if the previous update had
+//! (the fast contraction has hit the floor of rounding noise) and it is
+//! below the stagnation threshold; otherwise the caller is told to refresh
+//! the Jacobian at the current iterate. With a fresh Jacobian the rule is
+//! exactly rule 2, so convergence to round-off is kept.
 
 /// Tolerances and limits of every Newton iteration of a step.
 ///
@@ -58,6 +73,9 @@ impl Default for NewtonOptions {
 pub(crate) enum Verdict {
     Continue,
     Converged,
+    /// Simplified Newton only: the iteration contracts too slowly with the
+    /// Jacobian it has; evaluate a fresh one at the current iterate.
+    Refresh,
 }
 
 /// Tracks the size of successive updates of one Newton iteration and applies
@@ -66,6 +84,9 @@ pub(crate) enum Verdict {
 pub(crate) struct Monitor {
     opts: NewtonOptions,
     prev_step: f64,
+    /// Whether the update before the last one had at least quartered its
+    /// predecessor (simplified Newton only).
+    contracting: bool,
     pub(crate) iterations: usize,
 }
 
@@ -74,6 +95,7 @@ impl Monitor {
         Monitor {
             opts,
             prev_step: f64::INFINITY,
+            contracting: false,
             iterations: 0,
         }
     }
@@ -90,6 +112,36 @@ impl Monitor {
             return Verdict::Converged;
         }
         Verdict::Continue
+    }
+
+    /// [`update`](Self::update) for simplified Newton: `fresh` says whether
+    /// the Jacobian that gave this update was evaluated at the iterate it
+    /// was applied to. See the module docs.
+    pub(crate) fn update_frozen(&mut self, step: f64, x: f64, fresh: bool) -> Verdict {
+        self.iterations += 1;
+        let prev = self.prev_step;
+        self.prev_step = step;
+        let was_contracting = self.contracting;
+        self.contracting = step <= 0.25 * prev;
+        if step <= self.opts.step_tolerance * x {
+            return Verdict::Converged;
+        }
+        if self.contracting {
+            return Verdict::Continue;
+        }
+        let tiny = step <= self.opts.stagnation_threshold * x.max(1.0);
+        if fresh {
+            // Rule 2 as it stands.
+            if step > 0.5 * prev && tiny {
+                return Verdict::Converged;
+            }
+            return Verdict::Continue;
+        }
+        if was_contracting && tiny {
+            // Fast contraction that suddenly stops: the rounding noise.
+            return Verdict::Converged;
+        }
+        Verdict::Refresh
     }
 
     /// True once the iteration budget is spent.
@@ -116,6 +168,34 @@ mod tests {
         }
         assert!((x - 2f64.sqrt()).abs() <= f64::EPSILON * 2.0);
         assert!(mon.iterations <= 7, "{}", mon.iterations);
+    }
+
+    #[test]
+    fn simplified_newton_refreshes_a_slow_jacobian_but_accepts_the_noise_floor() {
+        let mut mon = Monitor::new(NewtonOptions::default());
+        // Fast linear contraction with a stale Jacobian: keep going.
+        assert_eq!(mon.update_frozen(1e-3, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(1e-6, 1.0, false), Verdict::Continue);
+        assert_eq!(mon.update_frozen(1e-9, 1.0, false), Verdict::Continue);
+        // The noise floor after fast contraction: converged.
+        assert_eq!(mon.update_frozen(0.9e-9, 1.0, false), Verdict::Converged);
+
+        let mut mon = Monitor::new(NewtonOptions::default());
+        assert_eq!(mon.update_frozen(1e-3, 1.0, true), Verdict::Continue);
+        // Slow contraction with a stale Jacobian: refresh.
+        assert_eq!(mon.update_frozen(0.6e-3, 1.0, false), Verdict::Refresh);
+        assert_eq!(mon.update_frozen(0.5e-7, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.2e-7, 1.0, false), Verdict::Converged);
+        // Slow and tiny, but not right after fast contraction: refresh.
+        assert_eq!(mon.update_frozen(0.15e-7, 1.0, false), Verdict::Refresh);
+        let mut mon = Monitor::new(NewtonOptions::default());
+        assert_eq!(mon.update_frozen(1e-3, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.9e-3, 1.0, false), Verdict::Refresh);
+        assert_eq!(mon.update_frozen(0.8e-3, 1.0, false), Verdict::Refresh);
+        // With a fresh Jacobian, the plain rule.
+        assert_eq!(mon.update_frozen(0.7e-3, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.6e-7, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.5e-7, 1.0, true), Verdict::Converged);
     }
 
     #[test]

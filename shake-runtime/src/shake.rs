@@ -4,23 +4,49 @@
 //!
 //! # The equation for λ
 //!
-//! r(λ) = g(φ_h(F_λ(z0))) with F_λ = exp(Σ λ_i X_{g_i}) is solved by Newton's
-//! method from λ = 0, to round-off (see [`newton`](crate::newton)). Its
-//! Jacobian is
+//! r(λ) = g(φ_h(F_λ(z0))) with F_λ = exp(Σ λ_i X_{g_i}) is solved to
+//! round-off (see [`newton`](crate::newton)), in one of two ways:
 //!
-//! ∂r/∂λ_j = g_z(z1⁻) · Dφ_h(y) · ∂F_λ(z0)/∂λ_j,
+//! - *Explicit base map* (Störmer–Verlet or symplectic Euler on a separable
+//!   H, recognised by a first application that needed no stage
+//!   iterations): r costs a fibre flow, a few gradients and g. The
+//!   Jacobian ∂r/∂λ is formed by forward differences of r itself,
+//!   (r(λ + ε s) − r(λ))/ε, ε ≈ √ε_mach times the scale of λ, once, at
+//!   λ = 0, and kept for the whole step: a *simplified* Newton method,
+//!   evaluated again at the current iterate only if the iteration stops
+//!   contracting fast ([`Monitor::update_frozen`]). Because λ = O(h) the
+//!   Jacobian changes by O(h) over the step, and the difference quotients
+//!   are accurate to ~1e-8: the iteration contracts by O(h) per iteration,
+//!   one or two more residual evaluations than Newton, and no Hessian, no
+//!   g_z and no tangent map is evaluated. Difference quotients of the true
+//!   F_λ are right for non-commuting X_{g_i} too. The converged λ solves
+//!   r(λ) = 0 to round-off whatever Jacobian led there.
+//! - *Implicit base map*: Newton's method with the Jacobian from the
+//!   tangent map at every iterate (its iterates decide which solution is
+//!   found far from M^H or for large h, and the runtime's checks of fibre
+//!   and component jumps judge them), column j being
+//!   g_z(z1⁻) · Dφ_h(y) · X_{g_j}(y) (Dφ_h from the base map's linearised
+//!   stage equations; ∂F_λ/∂λ_j = X_{g_j}(F_λ(z0)) is exact when the X_{g_i}
+//!   commute and an O(h) approximation otherwise). Note that Dφ_h ≈ I would
+//!   give g_z X_{g_j} = {g_i, g_j} = 0 on M: the O(h) part of Dφ_h carries
+//!   the whole Jacobian.
 //!
-//! with the base map's tangent map Dφ_h (its linearised stage equations) and
-//! ∂F_λ/∂λ_j = X_{g_j}(F_λ(z0)). That last identity is exact when the X_{g_i}
-//! commute (holonomic g, m = 1, or {g_i, g_j} = 0 identically) and otherwise
-//! a simplified-Newton approximation: it is exact at λ = 0 and the error is
-//! O(‖λ‖) = O(h), so convergence stays fast, and the converged λ is the
-//! exact solution regardless. Note that Dφ_h ≈ I would give g_z X_{g_j} =
-//! {g_i, g_j} = 0 on M: the O(h) part of Dφ_h carries the whole Jacobian.
+//! # Structure: chains
 //!
-//! Each evaluation of r solves the base map's own stage equations (for an
-//! implicit φ_h), warm-started from the previous evaluation: a nested
-//! iteration.
+//! Column j of the Jacobian is nonzero only in the rows of the constraints
+//! that share a variable with X_{g_j} or with its image under one
+//! application of the Hessian of H (Dφ_h = I + h J H_zz + O(h²)). From the
+//! macro's `JACOBIAN_PATTERN` and the entries that `hessian` writes, the
+//! workspace predicts once a band |i − j| ≤ b of the Jacobian (b = 1 for a
+//! chain). Columns j ≡ c (mod 2b+1) then have disjoint rows and are
+//! obtained together, from one difference quotient or one tangent map along
+//! Σ_j X_{g_j} (Curtis–Powell–Reid compression): 2b+1 evaluations instead
+//! of m, and the banded LU of [`linalg`](crate::linalg) in O(m b²) instead
+//! of O(m³). A chain of N links costs O(N) per step. Terms of order h² may
+//! reach outside the predicted band (an implicit base map on a Hessian that
+//! couples neighbours); the simplified iteration then contracts more
+//! slowly, asks for a refresh, and the second refresh within a step is the
+//! full, uncompressed tangent Jacobian.
 //!
 //! # The multiplier
 //!
@@ -32,7 +58,7 @@
 use crate::base_map::{BaseMap, BaseMapWorkspace};
 use crate::error::{Stage, StepError};
 use crate::fibre::FibreFlow;
-use crate::linalg::{lu_factor, lu_solve, norm_inf};
+use crate::linalg::{band_lu_factor, band_lu_solve, norm_inf, Band};
 use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::system::ConstrainedSystem;
 use crate::SolveError;
@@ -70,6 +96,24 @@ pub(crate) struct Workspace {
     pub(crate) s2: Vec<f64>,
     // Projection onto M (initial data).
     pub(crate) gram: Vec<f64>,
+    // SHAKE's structured Jacobian.
+    /// The predicted band of SHAKE's Jacobian (full for small m).
+    pub(crate) jac_band: Band,
+    /// Columns evaluated together: j ≡ c (mod groups).
+    pub(crate) groups: usize,
+    /// The rows (i, k) of the macro's `JACOBIAN_PATTERN`, for sparse
+    /// products with g_z.
+    pub(crate) pattern: Vec<(usize, usize)>,
+    pub(crate) piv_j: Vec<usize>,
+    /// The band `jac` was factorised with.
+    pub(crate) jac_factored: Band,
+    pub(crate) lambda_probe: Vec<f64>,
+    pub(crate) g_probe: Vec<f64>,
+    pub(crate) y_probe: Vec<f64>,
+    pub(crate) jv: Vec<f64>,
+    /// The scale of λ for difference quotients (adapted to the system on
+    /// first use: the fibre flow should move z by about √ε_mach ‖z‖).
+    pub(crate) lambda_scale: f64,
 }
 
 impl Workspace {
@@ -77,6 +121,12 @@ impl Workspace {
         let d = S::DOF;
         let m = S::CONSTRAINTS;
         let n = 2 * d;
+        let jac_band = predicted_band(sys);
+        let groups = if jac_band == Band::full(m) {
+            m
+        } else {
+            jac_band.lower + jac_band.upper + 1
+        };
         Workspace {
             d,
             m,
@@ -96,11 +146,92 @@ impl Workspace {
             hidden: vec![0.0; m],
             n_mat: vec![0.0; m * m],
             jac: vec![0.0; m * m],
-            piv: vec![0; m.max(1)],
+            // Two spare slots: `lu_factor` records a band there (linalg).
+            piv: vec![0; m + 2],
             s1: vec![0.0; m.max(1)],
             s2: vec![0.0; m.max(1)],
             gram: vec![0.0; m * m],
+            jac_band,
+            groups,
+            pattern: S::JACOBIAN_PATTERN
+                .iter()
+                .copied()
+                .filter(|&(i, k)| i < m && k < n)
+                .collect(),
+            piv_j: vec![0; m.max(1)],
+            jac_factored: jac_band,
+            lambda_probe: vec![0.0; m],
+            g_probe: vec![0.0; m],
+            y_probe: vec![0.0; n],
+            jv: vec![0.0; m],
+            lambda_scale: 0.0,
         }
+    }
+}
+
+/// A value no system computes: entries of a buffer still holding it after a
+/// call were not written (finite, so that `+=` still changes it).
+const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
+
+/// The band of SHAKE's Jacobian predicted from the structure of the system
+/// (module docs): column j reaches the constraints that read a variable of
+/// X_{g_j} or of J H_zz X_{g_j}. The pattern of H_zz is the set of entries
+/// `hessian` writes (the contract of `system`: exactly the structurally
+/// nonzero ones). Small systems get the full band.
+fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
+    let (d, m) = (S::DOF, S::CONSTRAINTS);
+    let n = 2 * d;
+    let full = Band::full(m);
+    if !full.pays(m) && m < 12 {
+        return full;
+    }
+    let mut vars_of = vec![Vec::new(); m];
+    let mut rows_of = vec![Vec::new(); n];
+    for &(i, k) in S::JACOBIAN_PATTERN {
+        if i < m && k < n {
+            vars_of[i].push(k);
+            rows_of[k].push(i);
+        }
+    }
+    let mut hz = vec![UNWRITTEN; n * n];
+    let point = vec![0.5; d];
+    sys.hessian(&point, &point, &mut hz);
+    let h_rows: Vec<Vec<usize>> = (0..n)
+        .map(|c| {
+            (0..n)
+                .filter(|&r| hz[r + c * n].to_bits() != UNWRITTEN.to_bits())
+                .collect()
+        })
+        .collect();
+    let swap = |k: usize| if k < d { k + d } else { k - d };
+    let mut band = Band { lower: 0, upper: 0 };
+    let mut seen = vec![usize::MAX; n];
+    let mut reach = Vec::new();
+    for j in 0..m {
+        reach.clear();
+        for &k in &vars_of[j] {
+            let v = swap(k);
+            for w in std::iter::once(v).chain(h_rows[v].iter().map(|&r| swap(r))) {
+                if seen[w] != j {
+                    seen[w] = j;
+                    reach.push(w);
+                }
+            }
+        }
+        for &w in &reach {
+            for &i in &rows_of[w] {
+                if i > j {
+                    band.lower = band.lower.max(i - j);
+                } else {
+                    band.upper = band.upper.max(j - i);
+                }
+            }
+        }
+    }
+    if band.pays(m) {
+        band
+    } else {
+        full
     }
 }
 
@@ -117,6 +248,17 @@ pub(crate) struct ShakeReport {
     pub(crate) lambda_predicted: f64,
     /// ‖λ − λ₁‖∞: how far Newton went beyond its linear prediction.
     pub(crate) lambda_correction: f64,
+}
+
+/// How SHAKE's Jacobian is evaluated (module docs).
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+enum JacobianMode {
+    /// Difference quotients of r, columns compressed by the band.
+    Differences,
+    /// Tangent maps, columns compressed by the band.
+    Tangent,
+    /// Tangent maps, one column at a time (the fallback).
+    TangentDense,
 }
 
 /// One SHAKE step in place: (q, p) = z0 ∈ M becomes z1⁻ = S_h(z0).
@@ -144,23 +286,16 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     ws.lambda.fill(0.0);
     let mut mon = Monitor::new(*opts);
     let mut converged = false;
+    // r(0): y = z0 (the fibre flow at λ = 0 is the identity).
+    ws.y.copy_from_slice(&ws.z0);
+    report.base_iterations += residual(sys, base, h, ws, opts, false)?;
+    // An explicit base map needed no stage iterations: its residual is
+    // cheap, and difference quotients beat the tangent map.
+    let explicit = report.base_iterations == 0;
+    let mut need_jacobian = true;
+    let mut refreshes = 0;
+    let mut prev_step = f64::INFINITY;
     loop {
-        // y = F_λ(z0), z1⁻ = φ_h(y), r = g(z1⁻).
-        ws.y.copy_from_slice(&ws.z0);
-        {
-            let (yq, yp) = ws.y.split_at_mut(d);
-            ws.fibre
-                .apply(sys, &ws.lambda, yq, yp)
-                .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
-        }
-        ws.z1.copy_from_slice(&ws.y);
-        {
-            let (zq, zp) = ws.z1.split_at_mut(d);
-            report.base_iterations += base
-                .apply(sys, h, zq, zp, &mut ws.base, opts)
-                .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
-        }
-        sys.constraints(&ws.z1[..d], &ws.z1[d..], &mut ws.g);
         let r = norm_inf(&ws.g);
         if !r.is_finite() || !ws.z1.iter().all(|x| x.is_finite()) {
             return Err(StepError::from_solve(
@@ -182,39 +317,66 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
                 },
             ));
         }
-        // Jacobian: column j = g_z(z1⁻) · Dφ_h(y) · X_{g_j}(y).
-        sys.constraint_jacobian(&ws.y[..d], &ws.y[d..], &mut ws.g_z_y);
-        sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
-        base.prepare_tangent(sys, h, &mut ws.base)
-            .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
-        for j in 0..m {
-            hamiltonian_field_of_constraint(&ws.g_z_y, d, m, j, &mut ws.tv);
-            base.apply_tangent(h, &mut ws.base, &mut ws.tv);
-            for i in 0..m {
-                let mut s = 0.0;
-                for k in 0..2 * d {
-                    s += ws.g_z_1[i + k * m] * ws.tv[k];
-                }
-                ws.jac[i + j * m] = s;
-            }
+        let fresh = need_jacobian;
+        if need_jacobian {
+            let mode = if refreshes >= 2 {
+                JacobianMode::TangentDense
+            } else if explicit {
+                JacobianMode::Differences
+            } else {
+                JacobianMode::Tangent
+            };
+            report.base_iterations += jacobian(sys, base, h, ws, opts, mode)?;
+            let band = if mode == JacobianMode::TangentDense {
+                Band::full(m)
+            } else {
+                ws.jac_band
+            };
+            band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j).map_err(|_| {
+                StepError::from_solve(
+                    Stage::Shake,
+                    SolveError::Singular {
+                        iterations: mon.iterations,
+                    },
+                )
+            })?;
+            ws.jac_factored = band;
+            need_jacobian = false;
         }
-        lu_factor(&mut ws.jac, m, &mut ws.piv).map_err(|_| {
-            StepError::from_solve(
-                Stage::Shake,
-                SolveError::Singular {
-                    iterations: mon.iterations,
-                },
-            )
-        })?;
         ws.delta.copy_from_slice(&ws.g);
-        lu_solve(&ws.jac, m, &ws.piv, &mut ws.delta);
+        band_lu_solve(&ws.jac, m, ws.jac_factored, &ws.piv_j, &mut ws.delta);
         for (l, dl) in ws.lambda.iter_mut().zip(&ws.delta) {
             *l -= dl;
         }
         if mon.iterations == 0 {
             ws.lambda_first.copy_from_slice(&ws.lambda);
         }
-        converged = mon.update(norm_inf(&ws.delta), norm_inf(&ws.lambda)) == Verdict::Converged;
+        let (step, size) = (norm_inf(&ws.delta), norm_inf(&ws.lambda));
+        if explicit {
+            match mon.update_frozen(step, size, fresh) {
+                Verdict::Converged => converged = true,
+                Verdict::Refresh => {
+                    need_jacobian = true;
+                    refreshes += 1;
+                }
+                Verdict::Continue => {}
+            }
+        } else {
+            // Newton proper: the far-from-M^H and large-h cases of implicit
+            // base maps are told apart by where Newton's own iterates lead
+            // (error tests: fibre and component jumps), so the iteration
+            // keeps that path; the Jacobian stays compressed.
+            converged = mon.update(step, size) == Verdict::Converged;
+            need_jacobian = true;
+            if step > 0.25 * prev_step && ws.groups < m {
+                // Slow for Newton: the band missed O(h²) couplings.
+                refreshes = 2;
+            }
+        }
+        prev_step = step;
+        // y = F_λ(z0), z1⁻ = φ_h(y), r = g(z1⁻).
+        ws.y.copy_from_slice(&ws.z0);
+        report.base_iterations += residual(sys, base, h, ws, opts, true)?;
     }
     q.copy_from_slice(&ws.z1[..d]);
     p.copy_from_slice(&ws.z1[d..]);
@@ -231,16 +393,153 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     Ok(report)
 }
 
-/// v ← X_{g_j}(z) = (∂g_j/∂p, −∂g_j/∂q) from g_z (m × 2d, column-major).
-pub(crate) fn hamiltonian_field_of_constraint(
-    g_z: &[f64],
-    d: usize,
-    m: usize,
-    j: usize,
-    v: &mut [f64],
-) {
-    for k in 0..d {
-        v[k] = g_z[j + (d + k) * m];
-        v[d + k] = -g_z[j + k * m];
+/// r(λ): from y = z0 (in `ws.y`), y ← F_λ(y) (if `flow`), z1⁻ = φ_h(y) in
+/// `ws.z1`, g(z1⁻) in `ws.g`. Returns the base map's stage iterations.
+fn residual<S: ConstrainedSystem, B: BaseMap>(
+    sys: &S,
+    base: &B,
+    h: f64,
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+    flow: bool,
+) -> Result<usize, StepError> {
+    let d = ws.d;
+    if flow {
+        let (yq, yp) = ws.y.split_at_mut(d);
+        ws.fibre
+            .apply(sys, &ws.lambda, yq, yp)
+            .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
+    }
+    ws.z1.copy_from_slice(&ws.y);
+    let (zq, zp) = ws.z1.split_at_mut(d);
+    let iterations = base
+        .apply(sys, h, zq, zp, &mut ws.base, opts)
+        .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
+    sys.constraints(&ws.z1[..d], &ws.z1[d..], &mut ws.g);
+    Ok(iterations)
+}
+
+/// Evaluates SHAKE's Jacobian at the current λ (whose residual is in
+/// `ws.y`, `ws.z1`, `ws.g` and the base map's workspace) into `ws.jac`, for
+/// the band `ws.jac_band` (or all of it for [`JacobianMode::TangentDense`]).
+/// Returns the stage iterations the difference quotients took.
+fn jacobian<S: ConstrainedSystem, B: BaseMap>(
+    sys: &S,
+    base: &B,
+    h: f64,
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+    mode: JacobianMode,
+) -> Result<usize, StepError> {
+    let (d, m) = (ws.d, ws.m);
+    let (band, groups) = if mode == JacobianMode::TangentDense {
+        (Band::full(m), m)
+    } else {
+        (ws.jac_band, ws.groups)
+    };
+    // Zero the band and the fill of the banded LU (rows j − l − u ..= j + l
+    // of column j); entries outside it are never read.
+    let fill = band.lower + band.upper;
+    for j in 0..m {
+        let lo = j.saturating_sub(fill);
+        let hi = (j + band.lower).min(m - 1);
+        ws.jac[lo + j * m..=hi + j * m].fill(0.0);
+    }
+    let mut iterations = 0;
+    if mode != JacobianMode::Differences {
+        sys.constraint_jacobian(&ws.y[..d], &ws.y[d..], &mut ws.g_z_y);
+        sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
+        base.prepare_tangent(sys, h, &mut ws.base)
+            .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
+    } else if ws.lambda_scale == 0.0 {
+        ws.lambda_scale = lambda_scale(sys, ws);
+    }
+    let lam_norm = norm_inf(&ws.lambda);
+    for c in 0..groups {
+        if mode == JacobianMode::Differences {
+            // λ + ε s_c, with the increment each λ_j actually got.
+            let eps = f64::EPSILON.sqrt() * lam_norm.max(ws.lambda_scale);
+            ws.lambda_probe.copy_from_slice(&ws.lambda);
+            for j in (c..m).step_by(groups) {
+                ws.lambda_probe[j] += eps;
+            }
+            ws.y_probe.copy_from_slice(&ws.z0);
+            {
+                let (yq, yp) = ws.y_probe.split_at_mut(d);
+                ws.fibre
+                    .apply(sys, &ws.lambda_probe, yq, yp)
+                    .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
+                iterations += base
+                    .apply(sys, h, yq, yp, &mut ws.base, opts)
+                    .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
+            }
+            sys.constraints(&ws.y_probe[..d], &ws.y_probe[d..], &mut ws.g_probe);
+            for i in 0..m {
+                ws.jv[i] = ws.g_probe[i] - ws.g[i];
+            }
+            for j in (c..m).step_by(groups) {
+                ws.lambda_probe[j] -= ws.lambda[j];
+            }
+        } else {
+            // tv = Dφ_h(y) Σ_{j ≡ c} X_{g_j}(y), jv = g_z(z1⁻) tv, both
+            // through the sparsity pattern of g_z.
+            ws.tv.fill(0.0);
+            for &(j, k) in &ws.pattern {
+                if j % groups == c {
+                    let v = ws.g_z_y[j + k * m];
+                    if k < d {
+                        ws.tv[d + k] -= v;
+                    } else {
+                        ws.tv[k - d] += v;
+                    }
+                }
+            }
+            base.apply_tangent(h, &mut ws.base, &mut ws.tv);
+            ws.jv.fill(0.0);
+            for &(i, k) in &ws.pattern {
+                ws.jv[i] += ws.g_z_1[i + k * m] * ws.tv[k];
+            }
+        }
+        // Row i of the compressed column belongs to the one column j ≡ c
+        // of its band.
+        for i in 0..m {
+            let lo = i.saturating_sub(band.lower);
+            let j = lo + (c + groups - lo % groups) % groups;
+            if j > i + band.upper || j >= m {
+                continue;
+            }
+            let scale = if mode == JacobianMode::Differences {
+                1.0 / ws.lambda_probe[j]
+            } else {
+                1.0
+            };
+            ws.jac[i + j * m] = ws.jv[i] * scale;
+        }
+    }
+    Ok(iterations)
+}
+
+/// The scale of λ at which the fibre flow moves z by about ‖z0‖ (its
+/// inverse speed), so that λ ± √ε_mach·scale perturbs z in its leading
+/// half of the digits: one application of the fibre flow along Σ_j λ_j = 1.
+fn lambda_scale<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> f64 {
+    let d = ws.d;
+    let unit = 1e-3;
+    ws.lambda_probe.fill(unit);
+    ws.y_probe.copy_from_slice(&ws.z0);
+    let (yq, yp) = ws.y_probe.split_at_mut(d);
+    let moved = match ws.fibre.apply(sys, &ws.lambda_probe, yq, yp) {
+        Ok(()) => ws
+            .y_probe
+            .iter()
+            .zip(&ws.z0)
+            .fold(0.0f64, |e, (a, b)| e.max((a - b).abs())),
+        Err(_) => 0.0,
+    };
+    let size = norm_inf(&ws.z0);
+    if moved > 0.0 && moved.is_finite() && size > 0.0 {
+        unit * size / moved
+    } else {
+        1.0
     }
 }
