@@ -7,7 +7,7 @@
 //! g₀ = |q₀|² − ℓ², g_k = |q_k − q_{k−1}|² − ℓ² (k ≥ 1). Straight-line loops
 //! that write only the structurally nonzero entries (the contract of
 //! `shake_runtime::system`), and the closed-form fibre flow.
-#![allow(dead_code)]
+#![allow(dead_code, clippy::needless_range_loop)]
 
 use shake::{ConstrainedSystem, ConstraintKind, Hamiltonian, State};
 

@@ -11,7 +11,7 @@
 //! Hessians. Buffers are allocated once (no allocation per call). What AD
 //! cannot know is the sparsity: every entry of every output is computed and
 //! written.
-#![allow(dead_code)]
+#![allow(dead_code, clippy::needless_range_loop)]
 
 use num_dual::{Dual64, DualNum, HyperDual64};
 use shake::{ConstrainedSystem, ConstraintKind, Hamiltonian};

@@ -2,7 +2,7 @@
 //! `constrained_system!` (the pendulums and Hopf from `shake::models`, the
 //! chains below), written by hand (`tests/common/models.rs` and
 //! `chain.rs`), and written once generically for num-dual (`dual.rs`).
-#![allow(dead_code)]
+#![allow(dead_code, clippy::needless_range_loop)]
 
 use super::dual::Generic;
 use num_dual::DualNum;

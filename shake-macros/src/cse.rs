@@ -243,3 +243,53 @@ impl Coder<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod expansion_cost {
+    use std::time::Instant;
+
+    /// Expansion time and size of the generated code of chains of N links
+    /// (BENCHMARKS.md): `cargo test -p shake-macros --release -- --ignored
+    /// --nocapture expansion_of_chains`.
+    #[test]
+    #[ignore = "a measurement, not a check"]
+    fn expansion_of_chains() {
+        println!("| N | expansion time | generated tokens | generated source (bytes) |");
+        println!("|---:|---:|---:|---:|");
+        for n in [4usize, 16, 64, 256] {
+            let src = format!(
+                "pub struct Chain {{
+                    parameters {{ length, gravity }}
+                    const N = {n};
+                    dof q[2*N], p[2*N];
+                    hamiltonian = sum i in 0..N {{ (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] }};
+                    constraints {{
+                        link[k in 0..N]: if k == 0 {{ q[0]^2 + q[1]^2 - length^2 }}
+                            else {{ (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 }},
+                    }}
+                }}"
+            );
+            let input: proc_macro2::TokenStream = src.parse().unwrap();
+            let mut best = f64::INFINITY;
+            let mut out = proc_macro2::TokenStream::new();
+            for _ in 0..3 {
+                let t = Instant::now();
+                out = crate::expand(input.clone());
+                best = best.min(t.elapsed().as_secs_f64());
+            }
+            let text = out.to_string();
+            assert!(!text.contains("compile_error"), "{n}: {text:.300}");
+            let tokens = out.into_iter().map(count).sum::<usize>();
+            println!("| {n} | {:.1} ms | {tokens} | {} |", best * 1e3, text.len());
+        }
+
+        fn count(t: proc_macro2::TokenTree) -> usize {
+            match t {
+                proc_macro2::TokenTree::Group(g) => {
+                    1 + g.stream().into_iter().map(count).sum::<usize>()
+                }
+                _ => 1,
+            }
+        }
+    }
+}
