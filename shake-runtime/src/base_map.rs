@@ -172,6 +172,52 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// v ← Dφ_h(y) v for v = (δq, δp) of length 2d, y the input of the last
     /// [`apply`](BaseMap::apply), after [`prepare_tangent`](BaseMap::prepare_tangent).
     fn apply_tangent(&self, h: f64, ws: &mut BaseMapWorkspace, v: &mut [f64]);
+
+    /// The increment (δq, δp) = φ_h(z) − z, without changing z, computed as
+    /// a small quantity in its own right (not as a difference of two
+    /// rounded states), so that its rounding error is O(ε h) rather than
+    /// O(ε |z|): what compensated summation of the state needs (see
+    /// [`compensated`](crate::compensated)). Leaves the workspace as
+    /// [`apply`](BaseMap::apply) does, so the tangent map is available.
+    ///
+    /// The provided implementation applies the map to a copy and subtracts
+    /// (rounding O(ε|z|)); the midpoint rule and explicit Störmer–Verlet
+    /// override it with increment forms of their stage equations.
+    ///
+    /// ```
+    /// use shake_runtime::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, NewtonOptions};
+    /// use shake_runtime::examples::HarmonicOscillator;
+    /// let mut ws = BaseMapWorkspace::new(1);
+    /// let (mut dq, mut dp) = ([0.0], [0.0]);
+    /// ImplicitMidpoint
+    ///     .increment(&HarmonicOscillator, 1e-3, &[1.0], &[0.0], &mut dq, &mut dp, &mut ws, &NewtonOptions::default())
+    ///     .unwrap();
+    /// // q1 − q0 = −h²/2 /(1 + h²/4) for the midpoint rule on q'' = −q.
+    /// assert!((dq[0] + 0.5e-6 / (1.0 + 0.25e-6)).abs() < 1e-21);
+    /// ```
+    #[allow(clippy::too_many_arguments)]
+    fn increment<S: Hamiltonian>(
+        &self,
+        sys: &S,
+        h: f64,
+        q: &[f64],
+        p: &[f64],
+        dq: &mut [f64],
+        dp: &mut [f64],
+        ws: &mut BaseMapWorkspace,
+        opts: &NewtonOptions,
+    ) -> Result<usize, SolveError> {
+        dq.copy_from_slice(q);
+        dp.copy_from_slice(p);
+        let it = self.apply(sys, h, dq, dp, ws, opts)?;
+        for (d, x) in dq.iter_mut().zip(q) {
+            *d -= x;
+        }
+        for (d, x) in dp.iter_mut().zip(p) {
+            *d -= x;
+        }
+        Ok(it)
+    }
 }
 
 /// The implicit midpoint rule z1 = z0 + h X_H((z0 + z1)/2): symplectic and
@@ -387,6 +433,85 @@ impl BaseMap for ImplicitMidpoint {
             *vi = 2.0 * mi - *vi;
         }
     }
+
+    /// The unknown is k = m − y, the half increment: k = (h/2) X_H(y + k),
+    /// solved by Newton to stagnation; z1 − z0 = 2k.
+    fn increment<S: Hamiltonian>(
+        &self,
+        sys: &S,
+        h: f64,
+        q: &[f64],
+        p: &[f64],
+        dq: &mut [f64],
+        dp: &mut [f64],
+        ws: &mut BaseMapWorkspace,
+        opts: &NewtonOptions,
+    ) -> Result<usize, SolveError> {
+        let d = ws.d;
+        let n = 2 * d;
+        let warm = ws.begin(q, p);
+        let BaseMapWorkspace {
+            y,
+            y_prev,
+            stage,
+            h_q,
+            h_p,
+            hess_a,
+            mat,
+            piv,
+            res,
+            tmp,
+            ..
+        } = ws;
+        // tmp holds k (stage holds m = y + k for the tangent map).
+        if warm {
+            for i in 0..n {
+                tmp[i] = stage[i] - y_prev[i];
+            }
+        } else {
+            sys.gradient(&y[..d], &y[d..], h_q, h_p);
+            for i in 0..d {
+                tmp[i] = 0.5 * h * h_p[i];
+                tmp[d + i] = -0.5 * h * h_q[i];
+            }
+        }
+        let y: &[f64] = y;
+        let iters = solve_stage(
+            tmp,
+            res,
+            mat,
+            piv,
+            opts,
+            |k, r| {
+                for i in 0..n {
+                    stage[i] = y[i] + k[i];
+                }
+                sys.gradient(&stage[..d], &stage[d..], h_q, h_p);
+                for i in 0..d {
+                    r[i] = k[i] - 0.5 * h * h_p[i];
+                    r[d + i] = k[d + i] + 0.5 * h * h_q[i];
+                }
+            },
+            |k, a| {
+                // y_prev is free once the warm start has been read.
+                for i in 0..n {
+                    y_prev[i] = y[i] + k[i];
+                }
+                sys.hessian(&y_prev[..d], &y_prev[d..], hess_a);
+                midpoint_matrix(a, hess_a, d, -0.5 * h);
+            },
+        );
+        ws.warm = iters.is_ok();
+        let iters = iters?;
+        for i in 0..n {
+            ws.stage[i] = ws.y[i] + ws.tmp[i];
+        }
+        for i in 0..d {
+            dq[i] = 2.0 * ws.tmp[i];
+            dp[i] = 2.0 * ws.tmp[d + i];
+        }
+        Ok(iters)
+    }
 }
 
 /// a = I + alpha · J H_zz (2d×2d), J = [[0, I], [−I, 0]].
@@ -586,6 +711,62 @@ impl BaseMap for StormerVerlet {
         block_mul_add(&ws.hess_b, d, 0, 0, dq1, -hh, dp);
         block_mul_add(&ws.hess_b, d, 0, d, dp_half, -hh, dp);
         dq.copy_from_slice(dq1);
+    }
+
+    /// Separable H: δq = h H_p(p½), δp = −(h/2)(H_q(q0) + H_q(q1)), each a
+    /// small quantity computed directly. Non-separable H: the provided
+    /// difference form.
+    fn increment<S: Hamiltonian>(
+        &self,
+        sys: &S,
+        h: f64,
+        q: &[f64],
+        p: &[f64],
+        dq: &mut [f64],
+        dp: &mut [f64],
+        ws: &mut BaseMapWorkspace,
+        opts: &NewtonOptions,
+    ) -> Result<usize, SolveError> {
+        if !S::SEPARABLE {
+            dq.copy_from_slice(q);
+            dp.copy_from_slice(p);
+            let it = self.apply(sys, h, dq, dp, ws, opts)?;
+            for (x, x0) in dq.iter_mut().zip(q) {
+                *x -= x0;
+            }
+            for (x, x0) in dp.iter_mut().zip(p) {
+                *x -= x0;
+            }
+            return Ok(it);
+        }
+        let d = ws.d;
+        let hh = 0.5 * h;
+        ws.begin(q, p);
+        let BaseMapWorkspace {
+            stage,
+            h_q,
+            h_p,
+            res,
+            ..
+        } = ws;
+        let (p_half, q1) = stage.split_at_mut(d);
+        let hq0 = &mut res[..d];
+        sys.grad_q(q, p, hq0);
+        for i in 0..d {
+            p_half[i] = p[i] - hh * hq0[i];
+        }
+        sys.grad_p(q, p_half, h_p);
+        for i in 0..d {
+            dq[i] = h * h_p[i];
+            q1[i] = q[i] + dq[i];
+        }
+        sys.grad_q(q1, p_half, h_q);
+        for i in 0..d {
+            // Two half kicks, as in `apply` (a sum first could overflow).
+            dp[i] = -hh * hq0[i] - hh * h_q[i];
+        }
+        ws.warm = true;
+        Ok(0)
     }
 }
 

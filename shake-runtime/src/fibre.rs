@@ -168,6 +168,118 @@ impl FibreFlow {
         }
     }
 
+    /// The increment (δq, δp) = exp(Σ λ_i X_{g_i})(z) − z without changing
+    /// z, computed as a small quantity (rounding O(ε‖λ‖ |z|), not O(ε|z|)),
+    /// for compensated summation (see [`compensated`](crate::compensated)):
+    ///
+    /// - holonomic: δq = 0, δp = −g_q(q)ᵀλ;
+    /// - quadratic: with the affine field A z + b, the increment is
+    ///   φ₁(A)(A z + b), the last column of exp([[A, A z + b], [0, 0]]);
+    /// - general: the flow minus the start (no better form is known here).
+    ///
+    /// ```
+    /// use shake_runtime::{FibreFlow, examples::HopfHarmonic};
+    /// let sys = HopfHarmonic::unit();
+    /// let mut flow = FibreFlow::new(&sys);
+    /// let (mut dq, mut dp) = ([0.0; 2], [0.0; 2]);
+    /// flow.increment(&sys, &[1e-9], &[1.0, 0.0], &[0.0, 0.0], &mut dq, &mut dp).unwrap();
+    /// // e^{−2iλ} − 1 = (cos 2λ − 1) − i sin 2λ.
+    /// assert!((dq[0] + 2e-18).abs() < 1e-30 && (dp[0] + 2e-9).abs() < 1e-24);
+    /// ```
+    pub fn increment<S: ConstrainedSystem>(
+        &mut self,
+        sys: &S,
+        lambda: &[f64],
+        q: &[f64],
+        p: &[f64],
+        dq: &mut [f64],
+        dp: &mut [f64],
+    ) -> Result<(), SolveError> {
+        let (d, m) = (self.d, self.m);
+        match S::KIND {
+            ConstraintKind::None => {
+                dq.fill(0.0);
+                dp.fill(0.0);
+                Ok(())
+            }
+            ConstraintKind::Holonomic => {
+                sys.constraint_jacobian(q, p, &mut self.g_z);
+                dq.fill(0.0);
+                for k in 0..d {
+                    let col = &self.g_z[k * m..(k + 1) * m];
+                    dp[k] = -col.iter().zip(lambda).map(|(a, l)| a * l).sum::<f64>();
+                }
+                Ok(())
+            }
+            ConstraintKind::Quadratic => {
+                self.linear_increment(lambda, q, p, dq, dp);
+                Ok(())
+            }
+            ConstraintKind::General => {
+                dq.copy_from_slice(q);
+                dp.copy_from_slice(p);
+                self.apply(sys, lambda, dq, dp)?;
+                for (x, x0) in dq.iter_mut().zip(q) {
+                    *x -= x0;
+                }
+                for (x, x0) in dp.iter_mut().zip(p) {
+                    *x -= x0;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// (δq, δp) = φ₁(A)(A z + b) for the affine field A z + b of λ.
+    fn linear_increment(
+        &mut self,
+        lambda: &[f64],
+        q: &[f64],
+        p: &[f64],
+        dq: &mut [f64],
+        dp: &mut [f64],
+    ) {
+        let (d, m) = (self.d, self.m);
+        let n = 2 * d;
+        let n1 = n + 1;
+        let aug = &mut self.aug;
+        aug.fill(0.0);
+        for (l, hi) in lambda.iter().zip(&self.hess_i) {
+            if *l == 0.0 {
+                continue;
+            }
+            for j in 0..n {
+                for r in 0..d {
+                    aug[r + j * n1] += l * hi[(d + r) + j * n];
+                    aug[(d + r) + j * n1] -= l * hi[r + j * n];
+                }
+            }
+        }
+        let z = &mut self.za;
+        z[..d].copy_from_slice(q);
+        z[d..].copy_from_slice(p);
+        // Last column: A z + b.
+        for r in 0..n {
+            let mut s = 0.0;
+            for (i, l) in lambda.iter().enumerate().take(m) {
+                s += if r < d {
+                    l * self.g_z0[i + (d + r) * m]
+                } else {
+                    -l * self.g_z0[i + (r - d) * m]
+                };
+            }
+            for j in 0..n {
+                s += aug[r + j * n1] * z[j];
+            }
+            aug[r + n * n1] = s;
+        }
+        expm(aug, n1, &mut self.t1, &mut self.t2, &mut self.t3);
+        for r in 0..d {
+            dq[r] = aug[r + n * n1];
+            dp[r] = aug[(d + r) + n * n1];
+        }
+    }
+
     /// p ← p − g_q(q)ᵀλ.
     fn kick<S: ConstrainedSystem>(&mut self, sys: &S, lambda: &[f64], q: &[f64], p: &mut [f64]) {
         let (d, m) = (self.d, self.m);
