@@ -16,6 +16,8 @@ mod simplify;
 mod symbolic;
 
 #[cfg(test)]
+mod fuzz_tests;
+#[cfg(test)]
 mod tests;
 
 use proc_macro::TokenStream;
