@@ -147,6 +147,21 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// The order of φ_h as an approximation of exp(h X_H).
     const ORDER: u32;
 
+    /// Whether φ_h is explicit for this H (no stage equations to solve):
+    /// Störmer–Verlet and symplectic Euler when H is separable. SHAKE then
+    /// forms its Jacobian from difference quotients of its cheap residual
+    /// (see `shake`). A structural fact, not a count of iterations: an
+    /// implicit map whose first guess happens to be exact is still implicit.
+    ///
+    /// ```
+    /// use shake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, examples::Pendulum};
+    /// assert!(StormerVerlet::explicit_for::<Pendulum>());
+    /// assert!(!ImplicitMidpoint::explicit_for::<Pendulum>());
+    /// ```
+    fn explicit_for<S: Hamiltonian>() -> bool {
+        false
+    }
+
     /// z ← φ_h(z) in place; returns the number of Newton iterations of its
     /// stage equations (0 when explicit).
     fn apply<S: Hamiltonian>(
@@ -532,6 +547,10 @@ impl BaseMap for StormerVerlet {
     const SYMMETRIC: bool = true;
     const ORDER: u32 = 2;
 
+    fn explicit_for<S: Hamiltonian>() -> bool {
+        S::SEPARABLE
+    }
+
     fn apply<S: Hamiltonian>(
         &self,
         sys: &S,
@@ -774,6 +793,10 @@ impl BaseMap for SymplecticEuler {
     const NAME: &'static str = "symplectic Euler";
     const SYMMETRIC: bool = false;
     const ORDER: u32 = 1;
+
+    fn explicit_for<S: Hamiltonian>() -> bool {
+        S::SEPARABLE
+    }
 
     fn apply<S: Hamiltonian>(
         &self,

@@ -203,11 +203,19 @@ impl FibreFlow {
                 Ok(())
             }
             ConstraintKind::Holonomic => {
-                sys.constraint_jacobian(q, p, &mut self.g_z);
+                // The kick −g_q(q)ᵀλ does not depend on p: the closed-form
+                // flow applied to p = 0 gives the increment itself, through
+                // the generated (sparse) code.
+                dq.copy_from_slice(q);
+                dp.fill(0.0);
+                let closed = sys.fibre_flow(lambda, dq, dp);
                 dq.fill(0.0);
-                for k in 0..d {
-                    let col = &self.g_z[k * m..(k + 1) * m];
-                    dp[k] = -col.iter().zip(lambda).map(|(a, l)| a * l).sum::<f64>();
+                if !closed {
+                    sys.constraint_jacobian(q, p, &mut self.g_z);
+                    for k in 0..d {
+                        let col = &self.g_z[k * m..(k + 1) * m];
+                        dp[k] = -col.iter().zip(lambda).map(|(a, l)| a * l).sum::<f64>();
+                    }
                 }
                 Ok(())
             }

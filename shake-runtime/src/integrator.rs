@@ -10,14 +10,13 @@
 //! ```
 
 use crate::base_map::BaseMap;
-use crate::compensated::{compensated_shake_step, CompensatedWorkspace};
 use crate::composition::Composition;
 use crate::diagnostics::{Accumulator, DiagnosticRecord};
 use crate::error::{SolveError, Stage, StepError};
 use crate::linalg::norm_inf;
 use crate::newton::NewtonOptions;
 use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
-use crate::shake::{shake_step, ShakeReport, Workspace};
+use crate::shake::{shake_step, Workspace};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
 
@@ -265,7 +264,8 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     compensated: bool,
     /// True inside a run (single steps have no carry to keep).
     carrying: bool,
-    comp: CompensatedWorkspace,
+    /// Kahan's carry of the state (2d): minus the bits lost so far.
+    carry: Vec<f64>,
     options: Options,
     diagnostics: bool,
     ws: Workspace,
@@ -289,7 +289,6 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn new(system: S, base: B, h: f64) -> Self {
         let ws = Workspace::new(&system);
-        let comp = CompensatedWorkspace::new(&system);
         Integrator {
             system,
             base,
@@ -298,7 +297,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             composition: Composition::SINGLE,
             compensated: true,
             carrying: false,
-            comp,
+            carry: vec![0.0; 2 * S::DOF],
             options: Options::default(),
             diagnostics: false,
             ws,
@@ -545,7 +544,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// tracking (reference ‖N‖ and det N) to it.
     fn begin(&mut self, q: &[f64], p: &[f64], step: u64, t: f64) -> Result<(), StepError> {
         self.check_h()?;
-        self.comp.reset();
+        self.carry.fill(0.0);
         if !q.iter().chain(p).all(|x| x.is_finite()) {
             return Err(StepError::NonFinite {
                 what: "initial state",
@@ -628,39 +627,24 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         t: f64,
     ) -> Result<StepInfo, StepError> {
         let opts = self.options;
-        // `..default()`: robust to fields SHAKE's report may gain.
-        #[allow(clippy::needless_update)]
-        let report = if self.compensated && self.carrying {
-            let r = compensated_shake_step(
-                &self.system,
-                &self.base,
-                h,
-                q,
-                p,
-                &mut self.comp,
-                &opts.newton,
-            )
-            .map_err(|e| e.at(step, t))?;
-            ShakeReport {
-                iterations: r.iterations,
-                base_iterations: r.base_iterations,
-                lambda: r.lambda,
-                lambda_predicted: r.lambda_predicted,
-                lambda_correction: r.lambda_correction,
-                ..ShakeReport::default()
-            }
+        // Inside a run the increment is added with Kahan's compensation
+        // (its carry is kept across the run's steps).
+        let carry = if self.compensated && self.carrying {
+            Some(self.carry.as_mut_slice())
         } else {
-            shake_step(
-                &self.system,
-                &self.base,
-                h,
-                q,
-                p,
-                &mut self.ws,
-                &opts.newton,
-            )
-            .map_err(|e| e.at(step, t))?
+            None
         };
+        let report = shake_step(
+            &self.system,
+            &self.base,
+            h,
+            q,
+            p,
+            &mut self.ws,
+            &opts.newton,
+            carry,
+        )
+        .map_err(|e| e.at(step, t))?;
         let mut info = StepInfo {
             shake_iterations: report.iterations,
             base_iterations: report.base_iterations,

@@ -56,6 +56,7 @@
 //! symplectic Euler).
 
 use crate::base_map::{BaseMap, BaseMapWorkspace};
+use crate::compensated::kahan_add;
 use crate::error::{Stage, StepError};
 use crate::fibre::FibreFlow;
 use crate::linalg::{band_lu_factor, band_lu_solve, norm_inf, Band};
@@ -78,6 +79,9 @@ pub(crate) struct Workspace {
     pub(crate) y: Vec<f64>,
     pub(crate) z1: Vec<f64>,
     pub(crate) tv: Vec<f64>,
+    /// The step's increment Δ = z1⁻ − z0 (and the base map's part of it).
+    pub(crate) dz: Vec<f64>,
+    pub(crate) db: Vec<f64>,
     // Multipliers.
     pub(crate) lambda: Vec<f64>,
     pub(crate) lambda_first: Vec<f64>,
@@ -110,6 +114,8 @@ pub(crate) struct Workspace {
     pub(crate) lambda_probe: Vec<f64>,
     pub(crate) g_probe: Vec<f64>,
     pub(crate) y_probe: Vec<f64>,
+    pub(crate) dz_probe: Vec<f64>,
+    pub(crate) z1_probe: Vec<f64>,
     pub(crate) jv: Vec<f64>,
     /// The scale of λ for difference quotients (adapted to the system on
     /// first use: the fibre flow should move z by about √ε_mach ‖z‖).
@@ -136,6 +142,8 @@ impl Workspace {
             y: vec![0.0; n],
             z1: vec![0.0; n],
             tv: vec![0.0; n],
+            dz: vec![0.0; n],
+            db: vec![0.0; n],
             lambda: vec![0.0; m],
             lambda_first: vec![0.0; m],
             delta: vec![0.0; m],
@@ -163,6 +171,8 @@ impl Workspace {
             lambda_probe: vec![0.0; m],
             g_probe: vec![0.0; m],
             y_probe: vec![0.0; n],
+            dz_probe: vec![0.0; n],
+            z1_probe: vec![0.0; n],
             jv: vec![0.0; m],
             lambda_scale: 0.0,
         }
@@ -263,6 +273,11 @@ enum JacobianMode {
 
 /// One SHAKE step in place: (q, p) = z0 ∈ M becomes z1⁻ = S_h(z0).
 /// The final λ is left in `ws.lambda`.
+///
+/// The step is computed in increment form, z1⁻ = z0 + Δ (see
+/// [`increment`]), and with a `carry` the increment is added to the state
+/// by Kahan's compensated summation (see [`compensated`](crate::compensated)).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     sys: &S,
     base: &B,
@@ -271,27 +286,26 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     p: &mut [f64],
     ws: &mut Workspace,
     opts: &NewtonOptions,
+    carry: Option<&mut [f64]>,
 ) -> Result<ShakeReport, StepError> {
     let (d, m) = (ws.d, ws.m);
     let mut report = ShakeReport::default();
     ws.base.reset_warm_start();
-    if m == 0 {
-        report.base_iterations = base
-            .apply(sys, h, q, p, &mut ws.base, opts)
-            .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
-        return Ok(report);
-    }
     ws.z0[..d].copy_from_slice(q);
     ws.z0[d..].copy_from_slice(p);
     ws.lambda.fill(0.0);
+    if m == 0 {
+        report.base_iterations = residual(sys, base, h, ws, opts, false)?;
+        add_increment(q, p, &ws.dz, carry);
+        return Ok(report);
+    }
     let mut mon = Monitor::new(*opts);
     let mut converged = false;
     // r(0): y = z0 (the fibre flow at λ = 0 is the identity).
-    ws.y.copy_from_slice(&ws.z0);
     report.base_iterations += residual(sys, base, h, ws, opts, false)?;
-    // An explicit base map needed no stage iterations: its residual is
-    // cheap, and difference quotients beat the tangent map.
-    let explicit = report.base_iterations == 0;
+    // An explicit base map makes the residual cheap: difference quotients
+    // of it beat the tangent map.
+    let explicit = B::explicit_for::<S>();
     let mut need_jacobian = true;
     let mut refreshes = 0;
     let mut prev_step = f64::INFINITY;
@@ -357,7 +371,12 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
                 Verdict::Converged => converged = true,
                 Verdict::Refresh => {
                     need_jacobian = true;
-                    refreshes += 1;
+                    // Only slow contraction far from round-off says the
+                    // band missed a coupling; a refresh at the noise floor
+                    // just confirms convergence.
+                    if step > opts.stagnation_threshold * size.max(1.0) {
+                        refreshes += 1;
+                    }
                 }
                 Verdict::Continue => {}
             }
@@ -375,11 +394,9 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
         }
         prev_step = step;
         // y = F_λ(z0), z1⁻ = φ_h(y), r = g(z1⁻).
-        ws.y.copy_from_slice(&ws.z0);
         report.base_iterations += residual(sys, base, h, ws, opts, true)?;
     }
-    q.copy_from_slice(&ws.z1[..d]);
-    p.copy_from_slice(&ws.z1[d..]);
+    add_increment(q, p, &ws.dz, carry);
     report.iterations = mon.iterations;
     report.lambda = norm_inf(&ws.lambda);
     if mon.iterations > 0 {
@@ -393,8 +410,78 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     Ok(report)
 }
 
-/// r(λ): from y = z0 (in `ws.y`), y ← F_λ(y) (if `flow`), z1⁻ = φ_h(y) in
-/// `ws.z1`, g(z1⁻) in `ws.g`. Returns the base map's stage iterations.
+/// z ← z + Δ: plainly, or with Kahan's compensation when a run keeps a carry.
+fn add_increment(q: &mut [f64], p: &mut [f64], dz: &[f64], carry: Option<&mut [f64]>) {
+    let d = q.len();
+    match carry {
+        Some(c) => {
+            let (cq, cp) = c.split_at_mut(d);
+            for k in 0..d {
+                kahan_add(&mut q[k], &mut cq[k], dz[k]);
+                kahan_add(&mut p[k], &mut cp[k], dz[d + k]);
+            }
+        }
+        None => {
+            for k in 0..d {
+                q[k] += dz[k];
+                p[k] += dz[d + k];
+            }
+        }
+    }
+}
+
+/// The SHAKE map in increment form: z1 = z0 + Δ(λ) with
+///
+/// Δ(λ) = [exp(Σ λ_i X_{g_i})(z0) − z0] + [φ_h(y) − y],  y = z0 + first bracket,
+///
+/// each bracket computed as a small quantity in its own right
+/// ([`FibreFlow::increment`], [`BaseMap::increment`]), so that Δ carries a
+/// rounding error O(ε|Δ|) rather than O(ε|z|): what compensated summation
+/// needs. Writes Δ into `dz` (using `db` as scratch), y and z1. Returns the
+/// base map's stage iterations. At λ = 0 (`flow` false) the fibre bracket is
+/// 0.
+#[allow(clippy::too_many_arguments)]
+fn increment<S: ConstrainedSystem, B: BaseMap>(
+    sys: &S,
+    base: &B,
+    h: f64,
+    lambda: &[f64],
+    flow: bool,
+    z0: &[f64],
+    fibre: &mut FibreFlow,
+    base_ws: &mut BaseMapWorkspace,
+    opts: &NewtonOptions,
+    dz: &mut [f64],
+    db: &mut [f64],
+    y: &mut [f64],
+    z1: &mut [f64],
+) -> Result<usize, StepError> {
+    let d = z0.len() / 2;
+    if flow {
+        let (fq, fp) = dz.split_at_mut(d);
+        fibre
+            .increment(sys, lambda, &z0[..d], &z0[d..], fq, fp)
+            .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
+    } else {
+        dz.fill(0.0);
+    }
+    for ((yi, zi), di) in y.iter_mut().zip(z0).zip(dz.iter()) {
+        *yi = zi + di;
+    }
+    let (bq, bp) = db.split_at_mut(d);
+    let iterations = base
+        .increment(sys, h, &y[..d], &y[d..], bq, bp, base_ws, opts)
+        .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
+    for (((zi1, zi), di), bi) in z1.iter_mut().zip(z0).zip(dz.iter_mut()).zip(db.iter()) {
+        *di += bi;
+        *zi1 = zi + *di;
+    }
+    Ok(iterations)
+}
+
+/// r(λ) = g(z1⁻(λ)) for the λ in `ws.lambda` (λ = 0 when `flow` is false):
+/// Δ in `ws.dz`, y in `ws.y`, z1⁻ in `ws.z1`, r in `ws.g`. Returns the base
+/// map's stage iterations.
 fn residual<S: ConstrainedSystem, B: BaseMap>(
     sys: &S,
     base: &B,
@@ -404,17 +491,21 @@ fn residual<S: ConstrainedSystem, B: BaseMap>(
     flow: bool,
 ) -> Result<usize, StepError> {
     let d = ws.d;
-    if flow {
-        let (yq, yp) = ws.y.split_at_mut(d);
-        ws.fibre
-            .apply(sys, &ws.lambda, yq, yp)
-            .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
-    }
-    ws.z1.copy_from_slice(&ws.y);
-    let (zq, zp) = ws.z1.split_at_mut(d);
-    let iterations = base
-        .apply(sys, h, zq, zp, &mut ws.base, opts)
-        .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
+    let iterations = increment(
+        sys,
+        base,
+        h,
+        &ws.lambda,
+        flow,
+        &ws.z0,
+        &mut ws.fibre,
+        &mut ws.base,
+        opts,
+        &mut ws.dz,
+        &mut ws.db,
+        &mut ws.y,
+        &mut ws.z1,
+    )?;
     sys.constraints(&ws.z1[..d], &ws.z1[d..], &mut ws.g);
     Ok(iterations)
 }
@@ -463,17 +554,24 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
             for j in (c..m).step_by(groups) {
                 ws.lambda_probe[j] += eps;
             }
-            ws.y_probe.copy_from_slice(&ws.z0);
-            {
-                let (yq, yp) = ws.y_probe.split_at_mut(d);
-                ws.fibre
-                    .apply(sys, &ws.lambda_probe, yq, yp)
-                    .map_err(|e| StepError::from_solve(Stage::Fibre, e))?;
-                iterations += base
-                    .apply(sys, h, yq, yp, &mut ws.base, opts)
-                    .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
-            }
-            sys.constraints(&ws.y_probe[..d], &ws.y_probe[d..], &mut ws.g_probe);
+            // The same increment form as the residual, so that the
+            // quotient differences like with like.
+            iterations += increment(
+                sys,
+                base,
+                h,
+                &ws.lambda_probe,
+                true,
+                &ws.z0,
+                &mut ws.fibre,
+                &mut ws.base,
+                opts,
+                &mut ws.dz_probe,
+                &mut ws.db,
+                &mut ws.y_probe,
+                &mut ws.z1_probe,
+            )?;
+            sys.constraints(&ws.z1_probe[..d], &ws.z1_probe[d..], &mut ws.g_probe);
             for i in 0..m {
                 ws.jv[i] = ws.g_probe[i] - ws.g[i];
             }
