@@ -15,8 +15,11 @@
 //!   z ↦ exp(A) z + φ₁(A) b, computed as the exponential of the augmented
 //!   (2d+1)×(2d+1) matrix [[A, b], [0, 0]] (scaling and squaring with a Taylor
 //!   series summed to round-off). The system's closed form is preferred when
-//!   it has one. For the Hopf constraint |q|² + |p|² − r² this is the rotation
-//!   z_k = q_k + i p_k ↦ e^{−2iλ} z_k.
+//!   it has one. One constraint with no linear part whose generator
+//!   L = J∇²g squares to −ω²I (detected once, in [`FibreFlow::new`]) has the
+//!   closed form exp(λL) = cos(ωλ) I + sin(ωλ)/ω · L, used instead of the
+//!   exponential: for the Hopf constraint |q|² + |p|² − r² (L = 2J, ω = 2)
+//!   it is the rotation z_k = q_k + i p_k ↦ e^{−2iλ} z_k.
 //! - **General** g: the flow is integrated numerically over unit time by
 //!   Gragg–Bulirsch–Stoer extrapolation (modified midpoint rule with 2, 4,
 //!   6, … substeps, polynomial extrapolation in the squared step size).
@@ -61,6 +64,9 @@ pub struct FibreFlow {
     t1: Vec<f64>,
     t2: Vec<f64>,
     t3: Vec<f64>,
+    /// Quadratic kind, one constraint without linear part whose generator
+    /// L = J∇²g squares to −ω²I: (ω, L), so that exp(λL) is a rotation.
+    rotation: Option<(f64, Vec<f64>)>,
     /// General kind: extrapolation rows and state vectors.
     row: Vec<f64>,
     row_prev: Vec<f64>,
@@ -102,6 +108,7 @@ impl FibreFlow {
             zc: vec![0.0; n],
             f: vec![0.0; n],
             start: vec![0.0; n],
+            rotation: None,
         };
         if quadratic {
             let zero = vec![0.0; d];
@@ -119,6 +126,7 @@ impl FibreFlow {
             flow.t1 = vec![0.0; n1 * n1];
             flow.t2 = vec![0.0; n1 * n1];
             flow.t3 = vec![0.0; n1 * n1];
+            flow.rotation = rotation_generator(&flow.hess_i, &flow.g_z0, d);
         }
         flow
     }
@@ -247,6 +255,16 @@ impl FibreFlow {
         dq: &mut [f64],
         dp: &mut [f64],
     ) {
+        if let Some((omega, l)) = &self.rotation {
+            // cos θ − 1 = −2 sin²(θ/2): no cancellation for small λ.
+            let half = (0.5 * omega * lambda[0]).sin();
+            let s = (omega * lambda[0]).sin() / omega;
+            rotate(l, -2.0 * half * half, s, q, p, &mut self.za, &mut self.zb);
+            let d = self.d;
+            dq.copy_from_slice(&self.zb[..d]);
+            dp.copy_from_slice(&self.zb[d..]);
+            return;
+        }
         let (d, m) = (self.d, self.m);
         let n = 2 * d;
         let n1 = n + 1;
@@ -300,6 +318,14 @@ impl FibreFlow {
 
     /// z ← exp(A) z + φ₁(A) b for the affine field A z + b.
     fn linear_flow(&mut self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) {
+        if let Some((omega, l)) = &self.rotation {
+            let (c, s) = ((omega * lambda[0]).cos(), (omega * lambda[0]).sin() / omega);
+            rotate(l, c - 1.0, s, q, p, &mut self.za, &mut self.zb);
+            for (x, dx) in q.iter_mut().chain(p.iter_mut()).zip(&self.zb) {
+                *x += dx;
+            }
+            return;
+        }
         let (d, m) = (self.d, self.m);
         let n = 2 * d;
         let n1 = n + 1;
@@ -476,5 +502,53 @@ impl FibreFlow {
             prev_err = err;
         }
         false
+    }
+}
+/// For one quadratic constraint with no linear part (∇g(0) = 0), the
+/// generator L = J∇²g of its fibre flow, if L² = −ω²I to round-off: then
+/// exp(λL) = cos(ωλ) I + sin(ωλ)/ω · L, a closed form (the Hopf constraint
+/// |q|² + |p|² − r² has L = 2J, ω = 2: the rotation z_k ↦ e^{−2iλ} z_k).
+fn rotation_generator(hess: &[Vec<f64>], g_z0: &[f64], d: usize) -> Option<(f64, Vec<f64>)> {
+    if hess.len() != 1 || g_z0.iter().any(|&x| x != 0.0) {
+        return None;
+    }
+    let n = 2 * d;
+    let a = &hess[0];
+    let mut l = vec![0.0; n * n];
+    for j in 0..n {
+        for r in 0..d {
+            // (J A)[r, j] = A[d+r, j]; (J A)[d+r, j] = −A[r, j].
+            l[r + j * n] = a[(d + r) + j * n];
+            l[(d + r) + j * n] = -a[r + j * n];
+        }
+    }
+    let mut l2 = vec![0.0; n * n];
+    crate::linalg::matmul(&l, &l, &mut l2, n);
+    let w2 = -l2[0];
+    if !(w2 > 0.0) || !w2.is_finite() {
+        return None;
+    }
+    let tol = 64.0 * f64::EPSILON * w2;
+    for j in 0..n {
+        for i in 0..n {
+            let want = if i == j { -w2 } else { 0.0 };
+            if (l2[i + j * n] - want).abs() > tol {
+                return None;
+            }
+        }
+    }
+    Some((w2.sqrt(), l))
+}
+
+/// Δz = a z + b L z for z = (q, p), into `out` (`z` is scratch): the
+/// increment of the rotation exp(λL) with a = cos(ωλ) − 1, b = sin(ωλ)/ω.
+fn rotate(l: &[f64], a: f64, b: f64, q: &[f64], p: &[f64], z: &mut [f64], out: &mut [f64]) {
+    let d = q.len();
+    let n = 2 * d;
+    z[..d].copy_from_slice(q);
+    z[d..].copy_from_slice(p);
+    for r in 0..n {
+        let lz: f64 = (0..n).map(|j| l[r + j * n] * z[j]).sum();
+        out[r] = a * z[r] + b * lz;
     }
 }

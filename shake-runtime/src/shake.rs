@@ -103,6 +103,8 @@ pub(crate) struct Workspace {
     // SHAKE's structured Jacobian.
     /// The predicted band of SHAKE's Jacobian (full for small m).
     pub(crate) jac_band: Band,
+    /// The structural band of N (full for small m, or when it does not pay).
+    pub(crate) n_band: Band,
     /// Columns evaluated together: j ≡ c (mod groups).
     pub(crate) groups: usize,
     /// The rows (i, k) of the macro's `JACOBIAN_PATTERN`, for sparse
@@ -160,6 +162,7 @@ impl Workspace {
             s2: vec![0.0; m.max(1)],
             gram: vec![0.0; m * m],
             jac_band,
+            n_band: structural_band_of_n(sys),
             groups,
             pattern: S::JACOBIAN_PATTERN
                 .iter()
@@ -188,6 +191,34 @@ const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
 /// X_{g_j} or of J H_zz X_{g_j}. The pattern of H_zz is the set of entries
 /// `hessian` writes (the contract of `system`: exactly the structurally
 /// nonzero ones). Small systems get the full band.
+/// The band of N = {{H,g_i},g_j} that the system writes at all: a system
+/// writes only structurally nonzero entries (the contract of `system`), so
+/// an entry still holding a sentinel after one evaluation is zero at every
+/// point. Full when the band does not pay.
+fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
+    let (d, m) = (S::DOF, S::CONSTRAINTS);
+    let full = Band::full(m);
+    if m < 12 {
+        return full;
+    }
+    let mut n_mat = vec![UNWRITTEN; m * m];
+    let point = vec![0.5; d];
+    sys.nondegeneracy_matrix(&point, &point, &mut n_mat);
+    for v in n_mat.iter_mut() {
+        *v = if v.to_bits() == UNWRITTEN.to_bits() {
+            0.0
+        } else {
+            1.0
+        };
+    }
+    let band = Band::of(&n_mat, m);
+    if band.pays(m) {
+        band
+    } else {
+        full
+    }
+}
+
 fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
     let (d, m) = (S::DOF, S::CONSTRAINTS);
     let n = 2 * d;
