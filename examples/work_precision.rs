@@ -113,6 +113,7 @@ fn methods<S: ConstrainedSystem + Clone, B: BaseMap>(
         for (c, label) in [
             (Composition::TRIPLE_JUMP, "order 4"),
             (Composition::YOSHIDA_6, "order 6"),
+            (Composition::MCLACHLAN_8, "order 8"),
         ] {
             let s = sys.clone();
             variants.push((

@@ -71,9 +71,7 @@ fn scene<S: ConstrainedSystem + Copy, R: r::System>(
     let (z_ref, ref_err) = r::reference_solution_auto(refsys, z0, t_end, 1e-14);
     println!("   {name}: reference at T = {t_end}, estimated error {ref_err:.1e}");
     let mut fig = Figure::new(
-        &format!(
-            "Convergence, {name}: global error at T = {t_end} (midpoint = Störmer–Verlet here)"
-        ),
+        &format!("Convergence, {name}: error at T = {t_end}"),
         "step size h",
         "max-norm error |z_N − z(T)|",
     )
@@ -182,7 +180,12 @@ fn scene<S: ConstrainedSystem + Copy, R: r::System>(
         } else {
             Mark::LinePoints
         };
-        fig = add(fig, &format!("RATTLE, {bname}"), &rattle, mark);
+        let label = if bname == StormerVerlet::NAME {
+            format!("RATTLE, {bname} (= midpoint here)")
+        } else {
+            format!("RATTLE, {bname}")
+        };
+        fig = add(fig, &label, &rattle, mark);
         fig = add(fig, &format!("SHAKE, {bname}"), &shake, Mark::Points);
     }
     // Reference slopes through the smallest error of the plot's right end.
