@@ -311,6 +311,59 @@ fn check_finite(v: &[f64], iterations: usize) -> Result<(), SolveError> {
     }
 }
 
+/// The implicit momentum stage x = p0 − c H_q(q0, x) (Störmer–Verlet's
+/// first half kick with c = h/2, symplectic Euler's kick with c = h), by
+/// Newton's method with the matrix I + c H_qp (∂H_q/∂p). It
+/// starts from the previous stage shifted by the change of p0 when
+/// `prev_p0` is given (warm start), else from the explicit kick.
+#[allow(clippy::too_many_arguments)]
+fn momentum_stage<S: Hamiltonian>(
+    sys: &S,
+    q0: &[f64],
+    p0: &[f64],
+    c: f64,
+    prev_p0: Option<&[f64]>,
+    x: &mut [f64],
+    res: &mut [f64],
+    mat: &mut [f64],
+    piv: &mut [usize],
+    h_q: &mut [f64],
+    hess_a: &mut [f64],
+    opts: &NewtonOptions,
+) -> Result<usize, SolveError> {
+    let d = q0.len();
+    match prev_p0 {
+        Some(prev) => {
+            for i in 0..d {
+                x[i] += p0[i] - prev[i];
+            }
+        }
+        None => {
+            sys.grad_q(q0, p0, h_q);
+            for i in 0..d {
+                x[i] = p0[i] - c * h_q[i];
+            }
+        }
+    }
+    solve_stage(
+        x,
+        res,
+        mat,
+        piv,
+        opts,
+        |x, r| {
+            sys.grad_q(q0, x, h_q);
+            for i in 0..d {
+                r[i] = x[i] - p0[i] + c * h_q[i];
+            }
+        },
+        |x, a| {
+            sys.hessian(q0, x, hess_a);
+            identity_plus_block(a, hess_a, d, 0, d, c);
+        },
+    )
+}
+
 /// Newton's method for a d-dimensional stage equation R(x) = 0 where
 /// `residual(x, res)` writes R and `matrix(x, mat)` writes dR/dx (d×d).
 fn solve_stage(
@@ -600,33 +653,20 @@ impl BaseMap for StormerVerlet {
         } = ws;
         let (p_half, q1) = stage.split_at_mut(d);
         let (q0, p0) = y.split_at(d);
-        if warm {
-            for i in 0..d {
-                p_half[i] += p0[i] - y_prev[d + i];
-            }
-        } else {
-            sys.grad_q(q0, p0, h_q);
-            for i in 0..d {
-                p_half[i] = p0[i] - hh * h_q[i];
-            }
-        }
         // p½ = p0 − (h/2) H_q(q0, p½).
-        let it1 = solve_stage(
+        let it1 = momentum_stage(
+            sys,
+            q0,
+            p0,
+            hh,
+            if warm { Some(&y_prev[d..]) } else { None },
             p_half,
             &mut res[..d],
             &mut mat[..d * d],
             piv,
+            h_q,
+            hess_a,
             opts,
-            |x, r| {
-                sys.grad_q(q0, x, h_q);
-                for i in 0..d {
-                    r[i] = x[i] - p0[i] + hh * h_q[i];
-                }
-            },
-            |x, a| {
-                sys.hessian(q0, x, hess_a);
-                identity_plus_block(a, hess_a, d, 0, d, hh);
-            },
         );
         let it1 = match it1 {
             Ok(it) => it,
@@ -839,33 +879,20 @@ impl BaseMap for SymplecticEuler {
         } = ws;
         let p1 = &mut stage[..d];
         let (q0, p0) = y.split_at(d);
-        if warm {
-            for i in 0..d {
-                p1[i] += p0[i] - y_prev[d + i];
-            }
-        } else {
-            sys.grad_q(q0, p0, h_q);
-            for i in 0..d {
-                p1[i] = p0[i] - h * h_q[i];
-            }
-        }
         // p1 = p0 − h H_q(q0, p1).
-        let it = solve_stage(
+        let it = momentum_stage(
+            sys,
+            q0,
+            p0,
+            h,
+            if warm { Some(&y_prev[d..]) } else { None },
             p1,
             &mut res[..d],
             &mut mat[..d * d],
             piv,
+            h_q,
+            hess_a,
             opts,
-            |x, r| {
-                sys.grad_q(q0, x, h_q);
-                for i in 0..d {
-                    r[i] = x[i] - p0[i] + h * h_q[i];
-                }
-            },
-            |x, a| {
-                sys.hessian(q0, x, hess_a);
-                identity_plus_block(a, hess_a, d, 0, d, h);
-            },
         );
         ws.warm = it.is_ok();
         let it = it?;
