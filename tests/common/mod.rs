@@ -1,2 +1,3 @@
+pub mod alloc;
 pub mod models;
 pub mod reference;
