@@ -63,6 +63,24 @@ impl Default for Pendulum {
     }
 }
 
+impl Pendulum {
+    /// The point of M^H at angle θ from the downward vertical with angular
+    /// velocity ω: q = ℓ(sin θ, −cos θ), p = ℓω(cos θ, sin θ).
+    ///
+    /// ```
+    /// use shake_runtime::examples::Pendulum;
+    /// let z = Pendulum::default().state(0.3, 0.5);
+    /// assert!((z.q.norm() - 1.0).abs() < 1e-15 && z.q.dot(&z.p).abs() < 1e-15);
+    /// ```
+    pub fn state(&self, theta: f64, omega: f64) -> crate::State {
+        let l = self.length;
+        crate::State::from_slices(
+            &[l * theta.sin(), -l * theta.cos()],
+            &[l * omega * theta.cos(), l * omega * theta.sin()],
+        )
+    }
+}
+
 impl Hamiltonian for Pendulum {
     const DOF: usize = 2;
     const SEPARABLE: bool = true;

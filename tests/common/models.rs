@@ -18,89 +18,12 @@ use shake::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 // Pendulum (Example 1.3)
 // ---------------------------------------------------------------------------
 
-/// Planar pendulum: H = |p|²/2 + γ q₂, g = |q|² − ℓ² (d = 2, m = 1).
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub struct Pendulum {
-    pub gravity: f64,
-    pub length: f64,
-}
-
-impl Default for Pendulum {
-    fn default() -> Self {
-        Pendulum {
-            gravity: 1.0,
-            length: 1.0,
-        }
-    }
-}
-
-impl Pendulum {
-    /// The point of M^H at angle θ from the downward vertical with angular
-    /// velocity ω: q = ℓ(sin θ, −cos θ), p = ℓω(cos θ, sin θ).
-    pub fn state(&self, theta: f64, omega: f64) -> shake::State {
-        let l = self.length;
-        shake::State::from_slices(
-            &[l * theta.sin(), -l * theta.cos()],
-            &[l * omega * theta.cos(), l * omega * theta.sin()],
-        )
-    }
-}
-
-impl Hamiltonian for Pendulum {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
-    fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
-        0.5 * (p[0] * p[0] + p[1] * p[1]) + self.gravity * q[1]
-    }
-    fn grad_q(&self, _q: &[f64], _p: &[f64], h_q: &mut [f64]) {
-        h_q[1] = self.gravity;
-    }
-    fn grad_p(&self, _q: &[f64], p: &[f64], h_p: &mut [f64]) {
-        h_p[0] = p[0];
-        h_p[1] = p[1];
-    }
-    fn hessian(&self, _q: &[f64], _p: &[f64], h_zz: &mut [f64]) {
-        h_zz[2 + 2 * 4] = 1.0;
-        h_zz[3 + 3 * 4] = 1.0;
-    }
-}
-
-impl ConstrainedSystem for Pendulum {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 0), (0, 1)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["rod"];
-    fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
-        g[0] = q[0] * q[0] + q[1] * q[1] - self.length * self.length;
-    }
-    fn constraint_jacobian(&self, q: &[f64], _p: &[f64], g_z: &mut [f64]) {
-        g_z[0] = 2.0 * q[0];
-        g_z[1] = 2.0 * q[1];
-    }
-    fn constraint_hessian(&self, _q: &[f64], _p: &[f64], lambda: &[f64], out: &mut [f64]) {
-        out[0] = 2.0 * lambda[0];
-        out[1 + 4] = 2.0 * lambda[0];
-    }
-    fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
-        out[0] = 2.0 * (q[0] * p[0] + q[1] * p[1]);
-    }
-    fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
-        out[0] = 2.0 * p[0];
-        out[1] = 2.0 * p[1];
-        out[2] = 2.0 * q[0];
-        out[3] = 2.0 * q[1];
-    }
-    fn nondegeneracy_matrix(&self, q: &[f64], _p: &[f64], n: &mut [f64]) {
-        n[0] = 4.0 * (q[0] * q[0] + q[1] * q[1]);
-    }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
-        let l2 = 2.0 * lambda[0];
-        p[0] -= l2 * q[0];
-        p[1] -= l2 * q[1];
-        true
-    }
-}
+/// Planar pendulum: H = |p|²/2 + γ q₂, g = |q|² − ℓ² (d = 2, m = 1). The
+/// runtime ships this hand-written model for its own doc examples; the tests
+/// and benchmarks use the same one.
+// Not every test crate that includes `common` uses every model.
+#[allow(unused_imports)]
+pub use shake::runtime::examples::Pendulum;
 
 // ---------------------------------------------------------------------------
 // Pendulum with a position-dependent mass (non-separable H)
