@@ -60,6 +60,7 @@ pub mod fibre;
 pub mod integrator;
 mod linalg;
 pub mod newton;
+pub mod particles;
 pub mod rattle;
 mod shake;
 mod state;

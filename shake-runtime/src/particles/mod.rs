@@ -1,0 +1,33 @@
+//! Large systems of particles with constraint families over run-time
+//! topologies: 10³ to 10⁶ constraints.
+//!
+//! The dense path of [`ConstrainedSystem`](crate::ConstrainedSystem) is
+//! unrolled at compile time: every constraint has its own straight-line
+//! code and the Newton matrices are dense or banded. That cannot reach a box
+//! of 10⁵ rigid waters. Here a constraint *family* is one small function, a
+//! [`Stencil`] of the few particles one member touches, applied to every row
+//! of a [`Table`] given at run time (the member's particle indices and its
+//! numbers, such as a bond length). Code size does not depend on the number
+//! of members, and every matrix is stored by its sparsity pattern, found once
+//! from the table.
+//!
+//! # Scope
+//!
+//! - Positions x_a ∈ R^D of n particles with masses m_a; momenta p_a.
+//! - H = Σ_a |p_a|²/(2 m_a) + V(x), V a sum of potential families (possibly
+//!   none): separable with quadratic kinetic energy, so Störmer–Verlet is
+//!   explicit and the base map of these runs.
+//! - Holonomic constraints g_k(x) = 0 only. Coisotropy then holds trivially
+//!   ({g_i, g_j} = 0 for any g(q)), and N = G M⁻¹ Gᵀ (G = g_x) is
+//!   symmetric positive definite exactly when G has full rank: the one
+//!   nondegeneracy condition left, checked on the actual topology.
+//!
+//! Momentum-dependent constraints stay on the dense path.
+
+mod stencil;
+mod system;
+mod table;
+
+pub use stencil::Stencil;
+pub use system::{ConstraintFamily, ParticleSystem, PotentialFamily};
+pub use table::{Table, TopologyError};

@@ -1,0 +1,58 @@
+//! One member of a family as a function of the particles it touches.
+
+/// A scalar function f(x; c) of the coordinates x of the `ARITY` particles
+/// one member touches (each in R^`DIM`) and of the `DATA` numbers c in the
+/// member's row of its [`Table`](super::Table): a constraint g_k (say
+/// |x_a − x_b|² − l_k²) or a term of the potential energy.
+///
+/// The local coordinates are laid out particle by particle: coordinate `c`
+/// of the member's `a`-th particle is `x[a * DIM + c]`, and the gradient
+/// uses the same layout. `constrained_system!` generates implementations
+/// from a template; a hand-written one is a few lines:
+///
+/// ```
+/// use shake_runtime::particles::Stencil;
+///
+/// /// g = |x_a − x_b|² − l², l from the table.
+/// struct Distance;
+///
+/// impl Stencil for Distance {
+///     const ARITY: usize = 2;
+///     const DIM: usize = 3;
+///     const DATA: usize = 1;
+///     fn value(&self, x: &[f64], c: &[f64]) -> f64 {
+///         (0..3).map(|k| (x[k] - x[3 + k]).powi(2)).sum::<f64>() - c[0] * c[0]
+///     }
+///     fn gradient(&self, x: &[f64], c: &[f64], grad: &mut [f64]) -> f64 {
+///         for k in 0..3 {
+///             let r = x[k] - x[3 + k];
+///             grad[k] = 2.0 * r;
+///             grad[3 + k] = -2.0 * r;
+///         }
+///         self.value(x, c)
+///     }
+/// }
+///
+/// let mut grad = [0.0; 6];
+/// let g = Distance.gradient(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[1.0], &mut grad);
+/// assert_eq!((g, grad[0]), (0.0, 2.0));
+/// ```
+///
+/// Implementations are called in the innermost loops with slices of exactly
+/// `ARITY * DIM` and `DATA` entries; they should be `#[inline]` straight-line
+/// code and must not allocate.
+pub trait Stencil: Send + Sync {
+    /// Particles per member.
+    const ARITY: usize;
+    /// Coordinates per particle.
+    const DIM: usize;
+    /// Numbers per row of the table.
+    const DATA: usize;
+
+    /// f(x; c).
+    fn value(&self, x: &[f64], c: &[f64]) -> f64;
+
+    /// f(x; c), with ∂f/∂x written into `grad` (`ARITY * DIM` entries, the
+    /// layout of `x`).
+    fn gradient(&self, x: &[f64], c: &[f64], grad: &mut [f64]) -> f64;
+}

@@ -1,0 +1,303 @@
+//! A system of particles: masses, constraint families, potential families.
+
+use super::{Stencil, Table, TopologyError};
+
+/// A constraint family as the solvers see it: the rows of a [`Table`]
+/// evaluated through one [`Stencil`]. Constraint k of the family is
+/// g_k(x) = f(x_{i_k1}, …, x_{i_kA}; c_k).
+pub trait ConstraintFamily: Send + Sync {
+    /// The family's declared name (for errors and diagnostics).
+    fn name(&self) -> &str;
+    /// Its rows.
+    fn table(&self) -> &Table;
+    /// Every g_k, written into `g` (one entry per member).
+    fn values(&self, q: &[f64], g: &mut [f64]);
+    /// Every g_k into `g`, and its gradient with respect to the member's own
+    /// particles into `grad` (`arity * dim` entries per member, member after
+    /// member, in the layout of [`Stencil`]).
+    fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]);
+}
+
+/// A potential family: V_fam(x) = Σ_k f(x_{i_k1}, …; c_k).
+pub trait PotentialFamily: Send + Sync {
+    /// The family's declared name.
+    fn name(&self) -> &str;
+    /// Its rows.
+    fn table(&self) -> &Table;
+    /// Σ_k f_k, with ∂/∂x of it *added* into `grad` (length n·D).
+    fn energy_gradient(&self, q: &[f64], grad: &mut [f64]) -> f64;
+}
+
+/// A family: a stencil applied to every row of a table.
+struct Family<S> {
+    name: String,
+    stencil: S,
+    table: Table,
+    dim: usize,
+}
+
+impl<S: Stencil> Family<S> {
+    /// Gathers member k's coordinates into `x` (`ARITY * DIM` entries).
+    #[inline(always)]
+    fn gather(&self, q: &[f64], k: usize, x: &mut [f64]) {
+        let d = self.dim;
+        for (a, &i) in self.table.particles(k).iter().enumerate() {
+            let i = i as usize * d;
+            x[a * d..(a + 1) * d].copy_from_slice(&q[i..i + d]);
+        }
+    }
+}
+
+/// Largest `ARITY * DIM` a stencil may have: its local coordinates live on
+/// the stack.
+pub(crate) const MAX_LOCAL: usize = 64;
+
+impl<S: Stencil> ConstraintFamily for Family<S> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn table(&self) -> &Table {
+        &self.table
+    }
+    fn values(&self, q: &[f64], g: &mut [f64]) {
+        let mut x = [0.0; MAX_LOCAL];
+        let x = &mut x[..S::ARITY * S::DIM];
+        for (k, gk) in g.iter_mut().enumerate().take(self.table.len()) {
+            self.gather(q, k, x);
+            *gk = self.stencil.value(x, self.table.data(k));
+        }
+    }
+    fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]) {
+        let w = S::ARITY * S::DIM;
+        let mut x = [0.0; MAX_LOCAL];
+        let x = &mut x[..w];
+        for k in 0..self.table.len() {
+            self.gather(q, k, x);
+            g[k] = self
+                .stencil
+                .gradient(x, self.table.data(k), &mut grad[k * w..(k + 1) * w]);
+        }
+    }
+}
+
+impl<S: Stencil> PotentialFamily for Family<S> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn table(&self) -> &Table {
+        &self.table
+    }
+    fn energy_gradient(&self, q: &[f64], grad: &mut [f64]) -> f64 {
+        let d = self.dim;
+        let w = S::ARITY * S::DIM;
+        let mut x = [0.0; MAX_LOCAL];
+        let mut gl = [0.0; MAX_LOCAL];
+        let mut v = 0.0;
+        for k in 0..self.table.len() {
+            self.gather(q, k, &mut x[..w]);
+            v += self
+                .stencil
+                .gradient(&x[..w], self.table.data(k), &mut gl[..w]);
+            for (a, &i) in self.table.particles(k).iter().enumerate() {
+                let i = i as usize * d;
+                for c in 0..d {
+                    grad[i + c] += gl[a * d + c];
+                }
+            }
+        }
+        v
+    }
+}
+
+/// n particles in R^D with masses, constraint families and potential
+/// families: H = Σ_a |p_a|²/(2 m_a) + Σ_fam V_fam(x), g = (g_fam)_fam.
+///
+/// Coordinates are stored particle by particle: x_a's c-th coordinate is
+/// `q[a * D + c]`, and likewise for p. Constraints are numbered family by
+/// family in the order they were added, member by member within a family.
+///
+/// ```
+/// use shake_runtime::particles::{ParticleSystem, Stencil, Table};
+/// # struct Distance;
+/// # impl Stencil for Distance {
+/// #     const ARITY: usize = 2; const DIM: usize = 3; const DATA: usize = 1;
+/// #     fn value(&self, x: &[f64], c: &[f64]) -> f64 {
+/// #         (0..3).map(|k| (x[k] - x[3 + k]).powi(2)).sum::<f64>() - c[0] * c[0] }
+/// #     fn gradient(&self, x: &[f64], c: &[f64], g: &mut [f64]) -> f64 {
+/// #         for k in 0..3 { let r = x[k] - x[3 + k]; g[k] = 2.0 * r; g[3 + k] = -2.0 * r; }
+/// #         self.value(x, c) }
+/// # }
+/// let mut bonds = Table::new(2, 1);
+/// bonds.push(&[0, 1], &[1.0]).unwrap();
+/// let dimer = ParticleSystem::new(3, vec![1.0, 2.0])
+///     .unwrap()
+///     .with_constraints("bond", Distance, bonds)
+///     .unwrap();
+/// assert_eq!((dimer.particles(), dimer.constraints()), (2, 1));
+/// ```
+pub struct ParticleSystem {
+    dim: usize,
+    masses: Vec<f64>,
+    inverse_masses: Vec<f64>,
+    constraints: Vec<Box<dyn ConstraintFamily>>,
+    potentials: Vec<Box<dyn PotentialFamily>>,
+}
+
+impl ParticleSystem {
+    /// Particles in R^`dim` with the given masses (finite and positive), no
+    /// constraint and no potential yet.
+    pub fn new(dim: usize, masses: Vec<f64>) -> Result<Self, TopologyError> {
+        if let Some((a, &m)) = masses
+            .iter()
+            .enumerate()
+            .find(|(_, m)| !(m.is_finite() && **m > 0.0))
+        {
+            return Err(TopologyError::BadValue {
+                family: "masses".into(),
+                member: a,
+                value: m,
+                why: "a mass must be finite and positive",
+            });
+        }
+        let inverse_masses = masses.iter().map(|m| 1.0 / m).collect();
+        Ok(ParticleSystem {
+            dim,
+            masses,
+            inverse_masses,
+            constraints: Vec::new(),
+            potentials: Vec::new(),
+        })
+    }
+
+    /// Adds a constraint family: `stencil` applied to every row of `table`.
+    /// Refuses rows of the wrong shape, particles that do not exist, and a
+    /// member that repeats another.
+    pub fn with_constraints<S: Stencil + 'static>(
+        mut self,
+        name: &str,
+        stencil: S,
+        table: Table,
+    ) -> Result<Self, TopologyError> {
+        let family = self.family(name, stencil, table, true)?;
+        self.constraints.push(Box::new(family));
+        Ok(self)
+    }
+
+    /// Adds a potential family: V gains Σ_k f(x_{i_k}; c_k).
+    pub fn with_potential<S: Stencil + 'static>(
+        mut self,
+        name: &str,
+        stencil: S,
+        table: Table,
+    ) -> Result<Self, TopologyError> {
+        let family = self.family(name, stencil, table, false)?;
+        self.potentials.push(Box::new(family));
+        Ok(self)
+    }
+
+    /// Validates a table against a stencil and this system's particles.
+    fn family<S: Stencil>(
+        &self,
+        name: &str,
+        stencil: S,
+        table: Table,
+        unique: bool,
+    ) -> Result<Family<S>, TopologyError> {
+        let family = || name.to_string();
+        if S::DIM != self.dim {
+            return Err(TopologyError::Dimension {
+                family: family(),
+                stencil: S::DIM,
+                system: self.dim,
+            });
+        }
+        let shape = |what, got, expected| TopologyError::RowShape {
+            family: family(),
+            member: 0,
+            what,
+            got,
+            expected,
+        };
+        if table.arity() != S::ARITY || S::ARITY * S::DIM > MAX_LOCAL {
+            return Err(shape("particle list", table.arity(), S::ARITY));
+        }
+        if table.width() != S::DATA {
+            return Err(shape("data", table.width(), S::DATA));
+        }
+        let n = self.particles();
+        for k in 0..table.len() {
+            if let Some(&i) = table.particles(k).iter().find(|&&i| i as usize >= n) {
+                return Err(TopologyError::DanglingParticle {
+                    family: family(),
+                    member: k,
+                    particle: i as usize,
+                    particles: n,
+                });
+            }
+        }
+        if unique {
+            // Members are equal when they touch the same set of particles
+            // with the same numbers (a bond given as (i, j) and as (j, i)).
+            let mut keys: Vec<(Vec<u32>, Vec<u64>, usize)> = (0..table.len())
+                .map(|k| {
+                    let mut p = table.particles(k).to_vec();
+                    p.sort_unstable();
+                    let c = table.data(k).iter().map(|v| v.to_bits()).collect();
+                    (p, c, k)
+                })
+                .collect();
+            keys.sort_unstable();
+            if let Some(w) = keys
+                .windows(2)
+                .find(|w| w[0].0 == w[1].0 && w[0].1 == w[1].1)
+            {
+                return Err(TopologyError::DuplicateMember {
+                    family: family(),
+                    first: w[0].2.min(w[1].2),
+                    second: w[0].2.max(w[1].2),
+                });
+            }
+        }
+        Ok(Family {
+            name: name.to_string(),
+            stencil,
+            table,
+            dim: self.dim,
+        })
+    }
+
+    /// The dimension D of each particle's position.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// The number n of particles (d = n·D degrees of freedom).
+    pub fn particles(&self) -> usize {
+        self.masses.len()
+    }
+
+    /// The masses m_a.
+    pub fn masses(&self) -> &[f64] {
+        &self.masses
+    }
+
+    /// 1/m_a.
+    pub fn inverse_masses(&self) -> &[f64] {
+        &self.inverse_masses
+    }
+
+    /// The number m of constraints, all families together.
+    pub fn constraints(&self) -> usize {
+        self.constraints.iter().map(|f| f.table().len()).sum()
+    }
+
+    /// The constraint families, in the order they were added.
+    pub fn constraint_families(&self) -> &[Box<dyn ConstraintFamily>] {
+        &self.constraints
+    }
+
+    /// The potential families, in the order they were added.
+    pub fn potential_families(&self) -> &[Box<dyn PotentialFamily>] {
+        &self.potentials
+    }
+}
