@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# Side by side, on this machine and in one go: LAMMPS `fix rattle` and
+# `fix shake` against shake's particle RATTLE, on the same rigid-water boxes
+# (the same data files), at tolerance 1e-10, 1 core, free flight.
+#
+#   bench/lammps/compare.sh            # 10^3 and 10^4 waters, 1000 steps, median of 3
+#   STEPS=200 REPS=1 SIZES=1000 bench/lammps/compare.sh   # a quick look
+#
+# Needs Debian's `lammps` and `python3-numpy`:
+#   apt-get install -y lammps python3-numpy
+# LAMMPS' cost is the `Modify` row of its `timer full` breakdown with the fix
+# minus the same row without it (cstyle none), per constraint per step; the
+# errors of both codes are measured from the final states (dump_error.py for
+# LAMMPS, the example's own max_rel_length_error for shake).
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../.." && pwd)
+steps=${STEPS:-1000}
+reps=${REPS:-3}
+sizes=${SIZES:-"1000 10000"}
+tol=1.0e-10
+
+if ! command -v lmp >/dev/null 2>&1; then
+    echo "compare.sh: no 'lmp' on PATH. Install LAMMPS and NumPy: apt-get install -y lammps python3-numpy" >&2
+    exit 2
+fi
+py=""
+for c in python3 /usr/bin/python3; do
+    if "$c" -c "import numpy" >/dev/null 2>&1; then py=$c; break; fi
+done
+if [ -z "$py" ]; then
+    echo "compare.sh: no python3 with numpy. Install it: apt-get install -y python3-numpy" >&2
+    exit 2
+fi
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+(cd "$work" && "$py" "$here/gen_data.py" >/dev/null)
+(cd "$root" && cargo build --release --example scale >/dev/null 2>&1)
+
+median() { sort -g | awk '{a[NR]=$1} END {print (NR % 2) ? a[(NR+1)/2] : (a[NR/2] + a[NR/2+1]) / 2}'; }
+
+# The Modify row's average time, in seconds, of one LAMMPS run.
+modify_time() {
+    local data=$1 style=$2 dump=${3:-0}
+    (cd "$work" && OMP_NUM_THREADS=1 lmp -nocite -in "$here/in.water" -var data "$data" \
+        -var cstyle "$style" -var tol $tol -var nsteps "$steps" -var dumpn "$dump" -log none) |
+        awk '$1 == "Modify" {print $5}'
+}
+
+echo "machine: $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores; load: $(uptime | sed 's/.*load average: //')"
+echo "LAMMPS: $(lmp -h 2>/dev/null | sed -n 's/^Large-scale.*- \(.*\)$/\1/p' | head -1)"
+echo
+echo "| waters | constraints | code | ns / constraint / step | max relative length error | max relative velocity residual |"
+echo "|---|---|---|---|---|---|"
+for n in $sizes; do
+    data=water_$n.data
+    m=$((3 * n))
+    base=$(for _ in $(seq "$reps"); do modify_time "$data" none; done | median)
+    for style in shake rattle; do
+        t=$(for _ in $(seq "$reps"); do modify_time "$data" "$style"; done | median)
+        modify_time "$data" "$style" "$steps" >/dev/null
+        errs=$("$py" "$here/dump_error.py" "$work/traj_$style.dump")
+        ns=$(awk -v t="$t" -v b="$base" -v m="$m" -v s="$steps" 'BEGIN {printf "%.1f", (t - b) / (m * s) * 1e9}')
+        le=$(echo "$errs" | sed 's/.*length_error=\([^ ]*\).*/\1/')
+        ve=$(echo "$errs" | sed 's/.*velocity=\([^ ]*\).*/\1/')
+        echo "| $n | $m | LAMMPS fix $style | $ns | $le | $ve |"
+    done
+    ours=$("$root/target/release/examples/scale" --lammps-data "$work/$data" --steps "$steps" --repeats "$reps" | grep '^scale ')
+    ns=$(echo "$ours" | sed 's/.*ns_per_constraint=\([^ ]*\).*/\1/')
+    le=$(echo "$ours" | sed 's/.*max_rel_length_error=\([^ ]*\).*/\1/')
+    ve=$(echo "$ours" | sed 's/.*max_rel_velocity=\([^ ]*\).*/\1/')
+    echo "| $n | $m | shake RATTLE | $ns | $le | $ve |"
+done
