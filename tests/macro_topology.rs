@@ -305,3 +305,43 @@ fn a_dangling_index_is_a_topology_error_naming_the_family() {
         .expect("refused");
     assert!(matches!(e, TopologyError::RowShape { .. }), "{e}");
 }
+
+/// Far from the origin the emitted value must not cancel: the template is
+/// emitted as written, |x_a − x_b|² − l², not expanded into
+/// x_a² − 2x_a·x_b + x_b² − l², which at |x| ~ 10³ loses ~ε|x|² ≈ 10⁻¹⁰ of
+/// a unit bond's g. Near each other x_a − x_b is exact in floating point
+/// (Sterbenz), so the written form is off by a few roundings of numbers of
+/// size l² only, wherever the pair is.
+#[test]
+fn values_far_from_the_origin_do_not_cancel() {
+    let bond = Water::new().bond_stencil();
+    let link = SpringChain::new(1.0).link_stencil();
+    let mut rng = Rng(11);
+    for t in [0.0, 1e3, 1e5, -3.0e6] {
+        for _ in 0..20 {
+            let l = rng.uniform(0.9, 1.1);
+            let a: Vec<f64> = (0..3).map(|_| t + rng.uniform(-1.0, 1.0)).collect();
+            let b: Vec<f64> = a.iter().map(|ac| ac + rng.uniform(-0.6, 0.6)).collect();
+            let x = [a[0], a[1], a[2], b[0], b[1], b[2]];
+            let r: Vec<f64> = (0..3).map(|c| a[c] - b[c]).collect(); // exact
+            let r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+            let g_ref = r2 - l * l;
+            let bound = 8.0 * f64::EPSILON * (r2 + l * l);
+            let mut grad = [0.0; 6];
+            for g in [
+                bond.value(&x, &[l]),
+                bond.gradient(&x, &[l], &mut grad),
+                link.value(&x, &[l]),
+            ] {
+                assert!(
+                    (g - g_ref).abs() <= bound,
+                    "translated by {t}: g = {g:e}, reference {g_ref:e}"
+                );
+            }
+            for c in 0..3 {
+                assert!((grad[c] - 2.0 * r[c]).abs() <= 4.0 * f64::EPSILON * r[c].abs().max(1.0));
+                assert_eq!(grad[c], -grad[3 + c]);
+            }
+        }
+    }
+}

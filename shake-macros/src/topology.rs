@@ -22,7 +22,7 @@
 use crate::cse::Coder;
 use crate::parse::{BinOp, Expr, ExprKind};
 use crate::parse_topology::{FamilyDecl, FamilyKind, ParticleDef};
-use crate::symbolic::{Func, Graph, Names, NodeId, ParamId, VarId};
+use crate::symbolic::{Func, Graph, Names, Node, NodeId, ParamId, VarId};
 use proc_macro2::{Span, TokenStream};
 use quote::{format_ident, quote};
 use std::collections::HashMap;
@@ -45,7 +45,10 @@ enum Val {
 /// One lowered template: the value and every entry of its gradient.
 struct Lowered {
     graph: Graph,
+    /// The canonical value (checks, docs).
     value: NodeId,
+    /// The value as written, for emission (see `Template::add`).
+    written: NodeId,
     /// ∂f/∂x_l for l in 0..ARITY·DIM (zeros included).
     gradient: Vec<NodeId>,
 }
@@ -58,13 +61,103 @@ struct Template<'a> {
     scalars: HashMap<String, NodeId>,
     /// Bound `sum` indices, innermost last.
     sums: Vec<(String, i64)>,
+    /// Build nodes as written (no canonical form): for the emitted value.
+    raw: bool,
 }
 
 fn err(span: Span, msg: impl std::fmt::Display) -> Error {
     Error::new(span, msg.to_string())
 }
 
+/// The arithmetic of a template, in one of two forms. Canonical (`raw ==
+/// false`): the smart constructors of `simplify`, whose canonical form makes
+/// the checks exact and the derivatives small. Raw: nodes as the user wrote
+/// them (constants folded, nothing expanded or reordered), for the emitted
+/// *value* only. The canonical form expands |x_a − x_b|² into
+/// x_a² − 2x_a x_b + x_b², which cancels catastrophically far from the
+/// origin (at |x| ~ 10³ it leaves ~10⁻¹⁰ of a unit bond's g, the tolerance
+/// SHAKE is asked to meet); the written form rounds only the difference.
+/// Raw nodes are never differentiated: the gradient comes from the
+/// canonical form, where expansion is harmless (2x_a − 2x_b is one rounding).
 impl Template<'_> {
+    fn add(&mut self, terms: Vec<NodeId>) -> NodeId {
+        if !self.raw {
+            return self.graph.add(terms);
+        }
+        match terms.len() {
+            0 => self.graph.zero(),
+            1 => terms[0],
+            _ => self.graph.intern(Node::Add(terms.into())),
+        }
+    }
+
+    fn add2(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        self.add(vec![a, b])
+    }
+
+    fn mul2(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        if !self.raw {
+            return self.graph.mul2(a, b);
+        }
+        match (self.graph.as_const(a), self.graph.as_const(b)) {
+            (Some(x), Some(y)) => self.graph.num(x * y),
+            (Some(c), None) | (None, Some(c)) if c == 1.0 => {
+                if self.graph.as_const(a).is_some() {
+                    b
+                } else {
+                    a
+                }
+            }
+            // At most one constant per product (`Coder` emits one coefficient).
+            (None, Some(_)) => self.graph.intern(Node::Mul(Box::new([b, a]))),
+            _ => self.graph.intern(Node::Mul(Box::new([a, b]))),
+        }
+    }
+
+    fn neg(&mut self, x: NodeId) -> NodeId {
+        let m1 = self.graph.num(-1.0);
+        self.mul2(m1, x)
+    }
+
+    fn sub(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        let nb = self.neg(b);
+        self.add2(a, nb)
+    }
+
+    fn div(&mut self, a: NodeId, b: NodeId) -> NodeId {
+        if !self.raw {
+            return self.graph.div(a, b);
+        }
+        let inv = self.powf(b, -1.0);
+        self.mul2(a, inv)
+    }
+
+    fn powf(&mut self, x: NodeId, r: f64) -> NodeId {
+        if !self.raw {
+            return self.graph.powf(x, r);
+        }
+        if let Some(c) = self.graph.as_const(x) {
+            return self.graph.num(c.powf(r));
+        }
+        if r == 1.0 {
+            x
+        } else if r == 0.0 {
+            self.graph.one()
+        } else if r.fract() == 0.0 && r.abs() < 64.0 {
+            self.graph.intern(Node::Pow(x, r as i32))
+        } else {
+            self.graph.intern(Node::PowF(x, crate::symbolic::bits(r)))
+        }
+    }
+
+    fn sqrt(&mut self, x: NodeId) -> NodeId {
+        self.powf(x, 0.5)
+    }
+
+    fn call(&mut self, f: Func, x: NodeId) -> NodeId {
+        self.graph.call(f, x)
+    }
+
     fn particle(&self, name: &str) -> Option<usize> {
         self.fam.particles.iter().position(|p| p == name)
     }
@@ -256,29 +349,29 @@ impl Template<'_> {
                 Val::S(v[c as usize])
             }
             ExprKind::Neg(a) => match self.val(a)? {
-                Val::S(s) => Val::S(self.graph.neg(s)),
-                Val::V(v) => Val::V(v.into_iter().map(|x| self.graph.neg(x)).collect()),
+                Val::S(s) => Val::S(self.neg(s)),
+                Val::V(v) => Val::V(v.into_iter().map(|x| self.neg(x)).collect()),
             },
             ExprKind::Binary(op, a, b) => {
                 let (x, y) = (self.val(a)?, self.val(b)?);
                 match (op, x, y) {
-                    (BinOp::Add, Val::S(x), Val::S(y)) => Val::S(self.graph.add2(x, y)),
-                    (BinOp::Sub, Val::S(x), Val::S(y)) => Val::S(self.graph.sub(x, y)),
+                    (BinOp::Add, Val::S(x), Val::S(y)) => Val::S(self.add2(x, y)),
+                    (BinOp::Sub, Val::S(x), Val::S(y)) => Val::S(self.sub(x, y)),
                     (BinOp::Add | BinOp::Sub, Val::V(x), Val::V(y)) => Val::V(
                         x.into_iter()
                             .zip(y)
                             .map(|(x, y)| match op {
-                                BinOp::Add => self.graph.add2(x, y),
-                                _ => self.graph.sub(x, y),
+                                BinOp::Add => self.add2(x, y),
+                                _ => self.sub(x, y),
                             })
                             .collect(),
                     ),
                     (BinOp::Add | BinOp::Sub, _, _) => {
                         return Err(err(e.span, "cannot add a scalar and a vector"))
                     }
-                    (BinOp::Mul, Val::S(x), Val::S(y)) => Val::S(self.graph.mul2(x, y)),
+                    (BinOp::Mul, Val::S(x), Val::S(y)) => Val::S(self.mul2(x, y)),
                     (BinOp::Mul, Val::S(s), Val::V(v)) | (BinOp::Mul, Val::V(v), Val::S(s)) => {
-                        Val::V(v.into_iter().map(|x| self.graph.mul2(s, x)).collect())
+                        Val::V(v.into_iter().map(|x| self.mul2(s, x)).collect())
                     }
                     (BinOp::Mul, Val::V(_), Val::V(_)) => {
                         return Err(err(
@@ -292,10 +385,8 @@ impl Template<'_> {
                             return Err(err(b.span, "division by zero"));
                         }
                         match x {
-                            Val::S(x) => Val::S(self.graph.div(x, y)),
-                            Val::V(v) => {
-                                Val::V(v.into_iter().map(|x| self.graph.div(x, y)).collect())
-                            }
+                            Val::S(x) => Val::S(self.div(x, y)),
+                            Val::V(v) => Val::V(v.into_iter().map(|x| self.div(x, y)).collect()),
                         }
                     }
                     (BinOp::Div, _, Val::V(_)) => {
@@ -312,7 +403,7 @@ impl Template<'_> {
                             if self.graph.is_zero(x) && r < 0.0 {
                                 return Err(err(e.span, "division by zero: 0 to a negative power"));
                             }
-                            Val::S(self.graph.powf(x, r))
+                            Val::S(self.powf(x, r))
                         }
                         _ => {
                             return Err(err(
@@ -330,7 +421,7 @@ impl Template<'_> {
                     }
                 }
             }
-            ExprKind::Call(f, args) => self.call(f, args)?,
+            ExprKind::Call(f, args) => self.function(f, args)?,
             ExprKind::Sum(var, lo, hi, body) => {
                 let (lo, hi) = (self.int(lo)?, self.int(hi)?);
                 if hi.saturating_sub(lo) > 1024 {
@@ -353,7 +444,7 @@ impl Template<'_> {
                     self.sums.pop();
                     terms.push(t?);
                 }
-                Val::S(self.graph.add(terms))
+                Val::S(self.add(terms))
             }
             ExprKind::If(..) => {
                 return Err(err(
@@ -368,7 +459,7 @@ impl Template<'_> {
         })
     }
 
-    fn call(&mut self, f: &Ident, args: &[Expr]) -> Result<Val, Error> {
+    fn function(&mut self, f: &Ident, args: &[Expr]) -> Result<Val, Error> {
         let name = f.to_string();
         let arity = match name.as_str() {
             "sqrt" | "sin" | "cos" | "tan" | "exp" | "ln" | "norm2" | "norm" => 1,
@@ -395,22 +486,14 @@ impl Template<'_> {
         Ok(match name.as_str() {
             "norm2" | "norm" => {
                 let v = self.vector(&args[0])?;
-                let sq: Vec<NodeId> = v.iter().map(|x| self.graph.mul2(*x, *x)).collect();
-                let n2 = self.graph.add(sq);
-                Val::S(if name == "norm" {
-                    self.graph.sqrt(n2)
-                } else {
-                    n2
-                })
+                let sq: Vec<NodeId> = v.iter().map(|x| self.mul2(*x, *x)).collect();
+                let n2 = self.add(sq);
+                Val::S(if name == "norm" { self.sqrt(n2) } else { n2 })
             }
             "dot" => {
                 let (u, v) = (self.vector(&args[0])?, self.vector(&args[1])?);
-                let t: Vec<NodeId> = u
-                    .into_iter()
-                    .zip(v)
-                    .map(|(a, b)| self.graph.mul2(a, b))
-                    .collect();
-                Val::S(self.graph.add(t))
+                let t: Vec<NodeId> = u.into_iter().zip(v).map(|(a, b)| self.mul2(a, b)).collect();
+                Val::S(self.add(t))
             }
             "cross" => {
                 if self.def.dim != 3 {
@@ -425,21 +508,21 @@ impl Template<'_> {
                 let (u, v) = (self.vector(&args[0])?, self.vector(&args[1])?);
                 let mut w = Vec::with_capacity(3);
                 for (i, j) in [(1, 2), (2, 0), (0, 1)] {
-                    let a = self.graph.mul2(u[i], v[j]);
-                    let b = self.graph.mul2(u[j], v[i]);
-                    w.push(self.graph.sub(a, b));
+                    let a = self.mul2(u[i], v[j]);
+                    let b = self.mul2(u[j], v[i]);
+                    w.push(self.sub(a, b));
                 }
                 Val::V(w)
             }
             _ => {
                 let x = self.scalar(&args[0])?;
                 Val::S(match name.as_str() {
-                    "sqrt" => self.graph.sqrt(x),
-                    "sin" => self.graph.call(Func::Sin, x),
-                    "cos" => self.graph.call(Func::Cos, x),
-                    "tan" => self.graph.call(Func::Tan, x),
-                    "exp" => self.graph.call(Func::Exp, x),
-                    _ => self.graph.call(Func::Ln, x),
+                    "sqrt" => self.sqrt(x),
+                    "sin" => self.call(Func::Sin, x),
+                    "cos" => self.call(Func::Cos, x),
+                    "tan" => self.call(Func::Tan, x),
+                    "exp" => self.call(Func::Exp, x),
+                    _ => self.call(Func::Ln, x),
                 })
             }
         })
@@ -469,6 +552,7 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
         graph,
         scalars,
         sums: Vec::new(),
+        raw: false,
     };
     let value = match t.val(&fam.template)? {
         Val::S(s) => s,
@@ -526,9 +610,24 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
     let gradient: Vec<NodeId> = (0..fam.particles.len() * d)
         .map(|l| graph.diff(value, VarId(l as u32)))
         .collect();
-    Ok(Lowered {
+    // The emitted value, as written (see `Template::add`); lowering it again
+    // cannot fail, the canonical pass accepted the same tokens.
+    let mut r = Template {
+        def,
+        fam,
         graph,
+        scalars: t.scalars,
+        sums: Vec::new(),
+        raw: true,
+    };
+    let written = match r.val(&fam.template)? {
+        Val::S(s) => s,
+        Val::V(_) => value,
+    };
+    Ok(Lowered {
+        graph: r.graph,
         value,
+        written,
         gradient,
     })
 }
@@ -657,10 +756,10 @@ fn emit_stencil(def: &ParticleDef, fam: &FamilyDecl, low: &Lowered) -> TokenStre
         dof: w,
         params: &all,
     };
-    let vb = coder.block(&[low.value]);
+    let vb = coder.block(&[low.written]);
     let v_lets = &vb.lets;
     let v_val = &vb.values[0];
-    let mut roots = vec![low.value];
+    let mut roots = vec![low.written];
     roots.extend(&low.gradient);
     let gb = coder.block(&roots);
     let g_lets = &gb.lets;
@@ -796,7 +895,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
         ));
         let tdoc = format!(
             " An empty table for the {kind} family `{fname}`: rows of {arity} particle indices \
-             and {ndata} numbers, `{table}{sig}`."
+             and {ndata} data numbers, `{table}{sig}`."
         );
         let tfn = format_ident!("{}_table", table.to_string());
         table_fns.push(quote! {
