@@ -345,3 +345,45 @@ fn values_far_from_the_origin_do_not_cancel() {
         }
     }
 }
+
+/// The same for a spring's force, s(|r| − r₀) r/|r|: the gradient is taken
+/// of the template as written, so |r| is not rebuilt from an expanded |r|²
+/// (which far out loses ~ε|x|²/|r|² of the force, 10⁻¹⁰ at |x| ~ 10³).
+/// A few roundings of the hand-written formula: 16 ε relative.
+#[test]
+fn spring_forces_far_from_the_origin_do_not_cancel() {
+    let s = 37.5;
+    let spring = SpringChain::new(s).spring_stencil();
+    let mut rng = Rng(13);
+    for t in [0.0, 1e3, 1e5, -3.0e6] {
+        for _ in 0..20 {
+            let rest = rng.uniform(0.9, 1.1);
+            let a: Vec<f64> = (0..3).map(|_| t + rng.uniform(-1.0, 1.0)).collect();
+            let b: Vec<f64> = a.iter().map(|ac| ac + rng.uniform(-0.9, 0.9)).collect();
+            let x = [a[0], a[1], a[2], b[0], b[1], b[2]];
+            let r: Vec<f64> = (0..3).map(|c| a[c] - b[c]).collect(); // exact
+            let n = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+            let mut grad = [0.0; 6];
+            let v = spring.gradient(&x, &[rest], &mut grad);
+            let v_ref = s / 2.0 * (n - rest) * (n - rest);
+            assert!(
+                (v - v_ref).abs() <= 16.0 * f64::EPSILON * s * (n + rest).powi(2),
+                "{t}: V {v:e} vs {v_ref:e}"
+            );
+            let f = s * (n - rest) / n;
+            let scale = s * (n + rest);
+            for c in 0..3 {
+                let g_ref = f * r[c];
+                assert!(
+                    (grad[c] - g_ref).abs() <= 16.0 * f64::EPSILON * scale,
+                    "{t}: {} vs {g_ref:e}",
+                    grad[c]
+                );
+                assert!(
+                    (grad[3 + c] + g_ref).abs() <= 16.0 * f64::EPSILON * scale,
+                    "{t}"
+                );
+            }
+        }
+    }
+}

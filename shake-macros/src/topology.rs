@@ -571,7 +571,7 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
             ))
         }
     };
-    let mut graph = t.graph;
+    let graph = t.graph;
     let what = match fam.kind {
         FamilyKind::Constraint => "constraint",
         FamilyKind::Potential => "potential",
@@ -607,9 +607,6 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
             ));
         }
     }
-    let gradient: Vec<NodeId> = (0..fam.particles.len() * d)
-        .map(|l| graph.diff(value, VarId(l as u32)))
-        .collect();
     // The emitted value, as written (see `Template::add`); lowering it again
     // cannot fail, the canonical pass accepted the same tokens.
     let mut r = Template {
@@ -624,8 +621,15 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
         Val::S(s) => s,
         Val::V(_) => value,
     };
+    let mut graph = r.graph;
+    // The gradient of the written form: sums the user did not expand stay
+    // factors (|x_a − x_b| in a spring's force is not rebuilt from
+    // x_a² − 2x_a x_b + x_b²), which is both more accurate and cheaper.
+    let gradient: Vec<NodeId> = (0..fam.particles.len() * d)
+        .map(|l| graph.diff(written, VarId(l as u32)))
+        .collect();
     Ok(Lowered {
-        graph: r.graph,
+        graph,
         value,
         written,
         gradient,
