@@ -1101,6 +1101,67 @@ mod tests {
         }
     }
 
+    fn template() -> impl proptest::strategy::Strategy<Value = String> {
+        use proptest::prelude::*;
+        let leaf = prop_oneof![
+            Just("x[a]".to_string()),
+            Just("x[b]".to_string()),
+            Just("x[c]".to_string()),
+            Just("p[a]".to_string()),
+            (0usize..4).prop_map(|i| format!("x[a][{i}]")),
+            (0usize..4).prop_map(|i| format!("x[b][{i}]")),
+            Just("l".to_string()),
+            Just("s".to_string()),
+            Just("k".to_string()),
+            Just("0".to_string()),
+            Just("2.5".to_string()),
+        ];
+        leaf.prop_recursive(4, 24, 3, |inner| {
+            prop_oneof![
+                (
+                    inner.clone(),
+                    prop::sample::select(vec!["+", "-", "*", "/", "^", "%"]),
+                    inner.clone()
+                )
+                    .prop_map(|(a, op, b)| format!("({a} {op} {b})")),
+                (inner.clone(), -3i64..4).prop_map(|(a, n)| format!("({a})^{n}")),
+                inner.clone().prop_map(|a| format!("-{a}")),
+                (
+                    prop::sample::select(vec!["norm2", "norm", "sqrt", "ln", "sin", "foo"]),
+                    inner.clone()
+                )
+                    .prop_map(|(f, a)| format!("{f}({a})")),
+                (
+                    prop::sample::select(vec!["dot", "cross"]),
+                    inner.clone(),
+                    inner.clone()
+                )
+                    .prop_map(|(f, a, b)| format!("{f}({a}, {b})")),
+                inner
+                    .clone()
+                    .prop_map(|a| format!("sum i in 0..3 {{ {a} + x[a][i] }}")),
+            ]
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config { cases: 256, ..Default::default() })]
+        /// Random templates never panic the macro: they expand to stencils
+        /// or to compile errors.
+        #[test]
+        fn random_templates_never_panic(t in template(), v in template()) {
+            let src = format!(
+                "struct S {{ parameters {{ s }} particles x[3]; \
+                 potential {{ e[k in es(a, b; l)]: {v} }} \
+                 constraints {{ c[k in cs(a, b; l)]: {t} }} }}"
+            );
+            let out = std::panic::catch_unwind(|| expand(&src));
+            proptest::prop_assert!(out.is_ok(), "the macro panicked on: {}", src);
+            let out = out.unwrap_or_default();
+            proptest::prop_assert!(out.contains("compile_error") || out.contains("Stencil for"));
+        }
+    }
+
     /// Expansion time of the run-time topology declarations, and of the
     /// refusal of a compile-time family of 2000 constraints on 8 coordinates:
     /// `cargo test -p shake-macros --release -- --ignored --nocapture expansion_of_topologies`.
