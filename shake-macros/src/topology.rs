@@ -1101,6 +1101,57 @@ mod tests {
         }
     }
 
+    #[test]
+    fn declarations_are_checked() {
+        let many: Vec<String> = (0..22).map(|i| format!("a{i}")).collect();
+        let cases = [
+            (
+                format!(
+                    "struct S {{ particles x[3]; constraints {{ c[k in t({}; l)]: x[a0][0] - l }} }}",
+                    many.join(", ")
+                ),
+                "more than the runtime's limit of 64",
+            ),
+            (
+                "struct S { particles x[3]; constraints { c[k in t(a, b)]: norm2(x[a] - x[b]) - 1, \
+                 d[k in t(a, b)]: norm2(x[a] - x[b]) - 2 } }"
+                    .to_string(),
+                "duplicate table name `t`",
+            ),
+            (
+                "struct S { particles x[3]; constraints { c: x[0][0] } }".to_string(),
+                "ranges over a run-time table",
+            ),
+            (
+                "struct S { dof q[2], p[2]; hamiltonian = p[0]^2; \
+                 constraints { c[k in t(a, b)]: q[0] } }"
+                    .to_string(),
+                "belongs to a `particles x[D];` system",
+            ),
+            (
+                "struct S { dof q[2], p[2]; hamiltonian = p[0]^2 + q[0][1]; }".to_string(),
+                "only for the templates of a `particles x[D];` system",
+            ),
+            (
+                "struct S { particles x[3]; hamiltonian = 0; }".to_string(),
+                "H = Σ_a |p_a|²/(2 m_a)",
+            ),
+            (
+                "struct S { parameters { a } particles x[3]; \
+                 constraints { c[k in t(a, b)]: norm2(x[a] - x[b]) - 1 } }"
+                    .to_string(),
+                "`a` is declared twice",
+            ),
+        ];
+        for (src, msg) in cases {
+            let out = expand(&src);
+            assert!(
+                out.contains("compile_error") && out.contains(msg),
+                "{src}: {out:.600}"
+            );
+        }
+    }
+
     fn template() -> impl proptest::strategy::Strategy<Value = String> {
         use proptest::prelude::*;
         let leaf = prop_oneof![
