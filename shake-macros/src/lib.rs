@@ -177,8 +177,9 @@ use quote::quote;
 /// buffer). Coisotropy needs no check: holonomic constraints Poisson-commute,
 /// {g_i, g_j} = 0 for every pair of members. What depends on the table is the
 /// runtime's (`TopologyError`, naming the family and member): dangling and
-/// repeated particle indices, duplicate members, and nondegeneracy on the
-/// actual topology (a cluster with more constraints than coordinates).
+/// repeated particle indices and duplicate members when `system(..)` builds
+/// the system, and nondegeneracy on the actual topology (a cluster with more
+/// constraints than coordinates) when a solver is set up on it.
 ///
 /// # What is generated
 ///

@@ -945,7 +945,8 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
          the member. Nondegeneracy (N = G M⁻¹ Gᵀ invertible, G the constraint gradient) \
          depends on the actual topology, so it is the runtime's to check, not the macro's: a \
          cluster of constraints with more constraints than the coordinates it moves can never \
-         have an invertible N (`TopologyError::TooManyConstraints`). Coisotropy needs no check: \
+         have an invertible N, and the runtime's solvers refuse it when they are set up on \
+         this system (`TopologyError::TooManyConstraints`). Coisotropy needs no check: \
          holonomic constraints Poisson-commute.",
         if arg_list.is_empty() {
             "none".to_string()
