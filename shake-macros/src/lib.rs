@@ -12,8 +12,10 @@ mod diff;
 mod emit;
 mod lower;
 mod parse;
+mod parse_topology;
 mod simplify;
 mod symbolic;
+mod topology;
 
 #[cfg(test)]
 mod fuzz_tests;
@@ -93,6 +95,92 @@ use quote::quote;
 /// (`coordinates`/`momenta`) declares the state; `hamiltonian` is required,
 /// `constraints` may be absent (m = 0).
 ///
+/// # Run-time topologies
+///
+/// Large systems (rigid water boxes, chains of 10⁶ links) declare each
+/// family once, as a *template* over a table whose rows are given at run
+/// time; nothing is unrolled, so expansion time and code size do not depend
+/// on the number of members, which the macro never sees. The system is then
+/// `n` particles in R^D (n and the masses given at run time) with
+/// H = Σ_a |p_a|²/(2 m_a) + V(x), V the sum of the `potential` families, and
+/// the holonomic constraint families of `constraints`; the runtime's
+/// `shake::runtime::particles` solves it.
+///
+/// ```ignore
+/// constrained_system! {
+///     /// Rigid water: three distance constraints per molecule.
+///     pub struct Water {
+///         particles x[3];
+///         constraints {
+///             bond[k in bonds(a, b; length)]: norm2(x[a] - x[b]) - length^2,
+///         }
+///     }
+/// }
+/// constrained_system! {
+///     pub struct SpringChain {
+///         parameters { stiffness }
+///         particles x[3];
+///         potential {
+///             spring[k in springs(a, b; rest)]: stiffness / 2 * (norm(x[a] - x[b]) - rest)^2,
+///         }
+///         constraints {
+///             link[k in links(a, b; length)]: norm2(x[a] - x[b]) - length^2,
+///         }
+///     }
+/// }
+/// let mut bonds = Water::bonds_table();          // Table::new(2, 1)
+/// bonds.push(&[0, 1], &[0.9572])?;
+/// let water = Water::new().system(vec![16.0, 1.0, 1.0], bonds)?;
+/// ```
+///
+/// ```text
+/// system     := doc* vis? "struct" Name "{" pitem* "}"
+/// pitem      := "parameters" "{" name,* "}"
+///             | "particles" x "[" DIM "]" ("," p "[" DIM "]")? ";"   -- DIM an integer literal
+///             | "potential" "{" family,* "}"
+///             | "constraints" "{" family,* "}"
+/// family     := fname "[" k "in" table "(" a,+ (";" c,*)? ")" "]" ":" template
+/// template   := expr, read with vector values:
+///               x "[" a "]"                      -- particle a's position, a vector of R^DIM
+///             | x "[" a "]" "[" int "]"          -- one of its coordinates
+///             | u ("+" | "-") v | s "*" u | u "*" s | u "/" s | "-" u
+///             | "dot" "(" u "," v ")" | "norm2" "(" u ")" | "norm" "(" u ")"
+///             | "cross" "(" u "," v ")"          -- R^3 only
+///             | the scalar expressions of `expr` (no `if`, no state arrays)
+/// ```
+///
+/// `a, b, …` are the particle variables of the table (the member's particle
+/// indices, ARITY of them), `c, …` its data variables (DATA numbers per row,
+/// such as a bond length); `k` numbers the rows and may not appear in the
+/// template (it is one formula for every member). `p` names the momenta
+/// (`p` by default) only so that using them can be refused: run-time
+/// families are holonomic. A template may use the parameters, its data
+/// variables, `x[a]` of its own particles, numbers and `sum i in 0..n { .. }`
+/// over compile-time ranges (for coordinates: `x[a][i]`).
+///
+/// Generated for `Water` (names from the declaration): the struct with one
+/// `pub f64` per parameter and `new(..)`; `Water::DIM`; per family a struct
+/// `WaterBond` (system name + family name in CamelCase, the parameters as
+/// fields) implementing `shake::runtime::particles::Stencil` (`ARITY`, `DIM`,
+/// `DATA`, `value` and `gradient` as straight-line code, differentiated once,
+/// simplified and CSE'd), `water.bond_stencil()`, and `Water::bonds_table()`
+/// (an empty `Table::new(ARITY, DATA)`); and
+/// `water.system(masses, bonds, …) -> Result<ParticleSystem, TopologyError>`,
+/// one `Table` per family in declaration order.
+///
+/// Refused at compile time, once per template (with spans): unknown names,
+/// particle indices not declared in the table signature, momenta in a
+/// template (momentum-dependent families need the compile-time form above),
+/// a template that does not depend on the positions (identically zero
+/// gradient) or does not depend on one of its declared particles, vector
+/// values where a scalar is needed, and ARITY·DIM > 64 (the runtime's stack
+/// buffer). Coisotropy needs no check: holonomic constraints Poisson-commute,
+/// {g_i, g_j} = 0 for every pair of members. What depends on the table is the
+/// runtime's (`TopologyError`, naming the family and member): dangling and
+/// repeated particle indices and duplicate members when `system(..)` builds
+/// the system, and nondegeneracy on the actual topology (a cluster with more
+/// constraints than coordinates) when a solver is set up on it.
+///
 /// # What is generated
 ///
 /// The struct (the user's doc and visibility, one `pub f64` field per
@@ -109,7 +197,10 @@ use quote::quote;
 /// of range, non-constant exponents, duplicate names, constraints that do not
 /// depend on the state, duplicate or dependent constraints, pairs {g_i,g_j}
 /// that do not vanish on M (coisotropy), and an identically singular N
-/// (nondegeneracy, the paper's Section 5.2).
+/// (nondegeneracy, the paper's Section 5.2). More constraints than
+/// coordinates (m > d, e.g. a family `link[k in 0..2000]` on `dof q[8]`) is
+/// refused right after lowering, before anything is differentiated: such a
+/// system can never be coisotropic with an invertible N.
 #[proc_macro]
 pub fn constrained_system(input: TokenStream) -> TokenStream {
     expand(input.into()).into()
@@ -117,6 +208,9 @@ pub fn constrained_system(input: TokenStream) -> TokenStream {
 
 /// The whole pipeline on `proc_macro2` tokens (testable outside a compiler).
 fn expand(input: TokenStream2) -> TokenStream2 {
+    if parse_topology::is_particle_system(&input) {
+        return topology::expand(input);
+    }
     let def: parse::SystemDef = match syn::parse2(input) {
         Ok(d) => d,
         Err(e) => return e.to_compile_error(),
@@ -130,6 +224,9 @@ fn expand(input: TokenStream2) -> TokenStream2 {
         Ok(s) => s,
         Err(es) => return errors(es),
     };
+    if let Some(e) = too_many_constraints(&sys) {
+        return errors(vec![e]);
+    }
     let g: Vec<_> = sys.constraints.iter().map(|c| c.node).collect();
     let der = diff::Derived::compute(&mut sys.graph, sys.dof, sys.hamiltonian, &g);
     if let Err(es) = check::check(&mut sys, &der) {
@@ -172,4 +269,27 @@ fn system_doc(sys: &lower::System, der: &diff::Derived) -> String {
         ));
     }
     doc
+}
+
+/// Refuses m > d before anything is differentiated (checking such a system
+/// pair by pair is O(m²) work for nothing): on M the gradients of
+/// constraints whose brackets vanish span an isotropic subspace of R^{2d},
+/// of dimension at most d, so with m > d either the constraints are not
+/// coisotropic or g_z has rank < m, and N = ({{H,g_i},g_j}) is singular.
+fn too_many_constraints(sys: &lower::System) -> Option<syn::Error> {
+    let (m, d) = (sys.declared, sys.dof);
+    (m > d).then(|| {
+        let c = &sys.constraints[d];
+        syn::Error::new(
+            c.span,
+            format!(
+                "{m} constraints on {d} coordinates: more constraints than coordinates (m > d), \
+                 from `{}` on. Constraints that Poisson-commute on M have gradients spanning an \
+                 isotropic subspace, of dimension at most d, so N = {{{{H,g_i}},g_j}} (m×m) can \
+                 never be invertible: the system violates the paper's coisotropy or \
+                 nondegeneracy assumption (Sections 3.2 and 5.2) whatever the constraints are",
+                c.name
+            ),
+        )
+    })
 }

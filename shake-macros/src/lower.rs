@@ -27,6 +27,10 @@ pub struct System {
     pub params: Vec<Ident>,
     pub hamiltonian: NodeId,
     pub constraints: Vec<Constraint>,
+    /// The number m of constraints declared. Members of families past the
+    /// (d+1)-th constraint are counted, not lowered: m > d is refused
+    /// (`lib.rs`), and lowering 10⁵ members just to refuse them takes a second.
+    pub declared: usize,
 }
 
 #[derive(Clone)]
@@ -347,6 +351,13 @@ impl Lowerer {
                 }
                 self.graph.add(terms)
             }
+            ExprKind::Component(_, _, bracket) => {
+                return Err(Error::new(
+                    *bracket,
+                    "`x[a][c]` (coordinate c of particle a) is only for the templates of a \
+                     `particles x[D];` system; with `dof`, index the state directly: `q[i]`",
+                ))
+            }
             ExprKind::If(c, t, f) => {
                 if self.cond(c)? {
                     self.real(t)?
@@ -357,9 +368,15 @@ impl Lowerer {
         })
     }
 
-    fn constraint(&mut self, c: &ConstraintDecl, out: &mut Vec<Constraint>) -> Result<(), Error> {
+    fn constraint(
+        &mut self,
+        c: &ConstraintDecl,
+        out: &mut Vec<Constraint>,
+        declared: &mut usize,
+    ) -> Result<(), Error> {
         match &c.family {
             None => {
+                *declared += 1;
                 let node = self.real(&c.expr)?;
                 out.push(Constraint {
                     name: c.name.to_string(),
@@ -368,7 +385,12 @@ impl Lowerer {
                 });
             }
             Some((k, lo, hi)) => {
-                for i in self.range(lo, hi)? {
+                let range = self.range(lo, hi)?;
+                *declared += range.clone().count();
+                for i in range {
+                    if out.len() > self.dof {
+                        return Ok(());
+                    }
                     self.bind_index(k, i)?;
                     let node = self.real(&c.expr);
                     self.indices.pop();
@@ -466,6 +488,7 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
         }
     };
     let mut constraints = Vec::new();
+    let mut declared = 0;
     let mut seen: HashMap<String, Span> = HashMap::new();
     for c in &def.constraints {
         let name = c.name.to_string();
@@ -479,7 +502,7 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
             continue;
         }
         seen.insert(name, c.name.span());
-        if let Err(e) = lw.constraint(c, &mut constraints) {
+        if let Err(e) = lw.constraint(c, &mut constraints, &mut declared) {
             errors.push(e);
         }
     }
@@ -490,6 +513,7 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
             params: def.params.clone(),
             hamiltonian: h,
             constraints,
+            declared,
         }),
         _ => Err(errors),
     }

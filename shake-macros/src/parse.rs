@@ -86,6 +86,9 @@ pub enum ExprKind {
     Ident(Ident),
     /// `q[index]`; the span is the bracket's.
     Index(Ident, Box<Expr>, Span),
+    /// `x[a][c]`: coordinate c of particle a, in the templates of a
+    /// `particles` system (see `topology`); the span is the second bracket's.
+    Component(Box<Expr>, Box<Expr>, Span),
     Neg(Box<Expr>),
     Binary(BinOp, Box<Expr>, Box<Expr>),
     Call(Ident, Vec<Expr>),
@@ -266,6 +269,13 @@ fn parse_constraints(input: ParseStream) -> syn::Result<Vec<ConstraintDecl>> {
             bracketed!(c in input);
             let k: Ident = c.parse()?;
             c.parse::<Token![in]>()?;
+            if c.peek(syn::Ident) && c.peek2(token::Paren) {
+                return Err(c.error(
+                    "a family over a run-time table, `name[k in table(a, b; data)]`, belongs to \
+                     a `particles x[D];` system (see \"Run-time topologies\" in the macro's docs); \
+                     with `dof`, families range over compile-time `lo..hi`",
+                ));
+            }
             let lo = parse_expr(&c, 0)?;
             c.parse::<Token![..]>()?;
             let hi = parse_expr(&c, 0)?;
@@ -423,10 +433,24 @@ fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
             if !c.is_empty() {
                 return Err(c.error("expected `]`"));
             }
-            return Ok(Expr {
+            let mut e = Expr {
                 kind: ExprKind::Index(id, Box::new(idx), b.span.join()),
                 span,
-            });
+            };
+            // `x[a][c]`: a coordinate of a particle (topology templates).
+            if input.peek(token::Bracket) {
+                let c;
+                let b = bracketed!(c in input);
+                let comp = parse_expr(&c, 0)?;
+                if !c.is_empty() {
+                    return Err(c.error("expected `]`"));
+                }
+                e = Expr {
+                    kind: ExprKind::Component(Box::new(e), Box::new(comp), b.span.join()),
+                    span,
+                };
+            }
+            return Ok(e);
         }
         if input.peek(token::Paren) {
             let c;
