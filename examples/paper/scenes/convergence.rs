@@ -160,7 +160,7 @@ fn scene<S: ConstrainedSystem + Copy, R: r::System>(
             "observed order of SHAKE's states",
             observed_order(hs, &shake),
             Bound::AtLeast(0.9),
-            "Prop 4.2: order ≥ 1; states O(h) off M^H",
+            "Prop 4.2: order ≥ 1; states O(h) off Mᴴ",
         );
         claims.check(
             "3",

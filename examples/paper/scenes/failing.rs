@@ -99,7 +99,7 @@ fn refused<S: ConstrainedSystem + Clone>(
         "typed errors / attempts",
         typed(integ.project_to_hidden(z)),
         Bound::AtLeast(1.0),
-        "N singular: M^H is not a symplectic manifold here (Thm 2.3)",
+        "N singular: Mᴴ is not a symplectic manifold here (Thm 2.3)",
     );
     if step_too {
         let mut shake = Integrator::new(sys, ImplicitMidpoint, h).shake();

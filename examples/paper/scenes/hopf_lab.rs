@@ -309,7 +309,7 @@ pub fn unit_starts() -> Result<Vec<GravityStart>, StepError> {
         let scaled = [k * z[0], k * z[1], k * z[2], k * z[3]];
         let on = integ.project_to_hidden(&state(&scaled))?;
         Ok(GravityStart {
-            name: format!("{name} (on the unit M^H)"),
+            name: format!("{name} (on the unit Mᴴ)"),
             z: arr(&on),
             radius2: 1.0,
         })
