@@ -1,6 +1,7 @@
 //! This facade re-exports the two crates: [`constrained_system!`] (from
 //! `shake-macros`) declares a system and generates its derivatives at compile
-//! time; [`runtime`] (`shake-runtime`) integrates it. The README below is
+//! time; [`runtime`] (`shake-runtime`) integrates it. [`prelude`] gathers
+//! what a first program needs (`use shake::prelude::*;`). The README below is
 //! the crate's front page, and its example is compiled and run as a doctest.
 //!
 #![doc = include_str!("../README.md")]
@@ -10,6 +11,7 @@
 extern crate self as shake;
 
 pub mod models;
+pub mod prelude;
 
 pub use shake_macros::constrained_system;
 pub use shake_runtime as runtime;
