@@ -30,8 +30,9 @@ pub fn preamble(quick: bool, seconds: f64) -> String {
          Column `#` is the claim's number in the README's table \"What the paper claims, \
          and what we measure\" (1–9). Conventions: z = (q, p), X_F = (F_p, −F_q), \
          {{F,G}} = F_q·G_p − F_p·G_q, q' = H_p + g_pᵀλ, p' = −H_q − g_qᵀλ; M = {{g = 0}}, \
-         Mᴴ = {{g = 0, {{g,H}} = 0}}. A claim passes when the measured value lies within \
-         the bound; the last-but-one column says where the bound comes from. The same \
+         Mᴴ = {{g = 0, {{g,H}} = 0}}. Names such as `eq hopf_lambda` and `fig_fibres` are \
+         the labels of the paper's equations and figures in its LaTeX source. A claim \
+         passes when the measured value lies within the bound; the last-but-one column says where the bound comes from. The same \
          rows, unformatted, are in `claims.csv`; each figure's data is in the `.csv` next \
          to its `.png`.\n\
          \n",
