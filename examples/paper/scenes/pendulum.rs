@@ -587,7 +587,7 @@ fn one_step_figure(ctx: &Ctx) -> PlotResult<()> {
         "q₂",
     )
     .equal_aspect()
-    .legend_at(SeriesLabelPosition::LowerRight)
+    .legend_at(SeriesLabelPosition::UpperLeft)
     .series_colored("M: the circle |q| = 1", arc, Mark::Dashed, PALETTE[6])
     .series_colored(
         "z0 ∈ M, not on Mᴴ: velocity p0",
