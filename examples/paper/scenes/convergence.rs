@@ -1,4 +1,4 @@
-//! Convergence (claim 3 of MISSION.md; Prop. 4.2 and Section 4.5).
+//! Convergence (claim 3 in the README's table; Prop. 4.2 and Section 4.5).
 //!
 //! Global error at a fixed time against h, for every base map, SHAKE and
 //! RATTLE, on the pendulum and on the harmonic constraint with gravity,

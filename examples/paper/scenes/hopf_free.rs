@@ -1,5 +1,5 @@
 //! The harmonic (Hopf) constraint with H = |p|²/2, the paper's Section 5.4.1
-//! (claim 7 of MISSION.md).
+//! (claim 7 in the README's table).
 //!
 //! g = |q|² + |p|² − 1 on R⁴ = C² (z_k = q_k + i p_k), H = |p|²/2, SHAKE and
 //! RATTLE over the implicit midpoint rule. The fibres are the great circles
@@ -9,7 +9,7 @@
 //! `tests/common/reference.rs`, which shares no code with shake.
 //!
 //! - **The multiplier** (eq hopf_lambda): λ_paper = |p|²/(|q|² − |p|²). The
-//!   paper writes q' = (1 + λ)p; MISSION's convention q' = H_p + g_pᵀλ with
+//!   paper writes q' = (1 + λ)p; our convention q' = H_p + g_pᵀλ with
 //!   g_p = 2p gives λ = λ_paper/2. It is checked against the multiplier of the
 //!   index-reduced DAE (N λ = {{g,H},H}, from num-dual derivatives), and
 //!   against the runtime: the whole displacement along the fibres of one

@@ -1,5 +1,5 @@
 //! The harmonic constraint with a linear potential, the paper's Section
-//! 5.4.2 (claims 8 and 9 of MISSION.md).
+//! 5.4.2 (claims 8 and 9 in the README's table).
 //!
 //! H = |p|²/2 − g·q with g = (0, −1) on the sphere |q|² + |p|² = r², SHAKE
 //! and RATTLE over the implicit midpoint rule with h = 0.1, from the paper's

@@ -1,4 +1,4 @@
-//! The planar pendulum of Example 1.3 (claims 1–4 of MISSION.md).
+//! The planar pendulum of Example 1.3 (claims 1–4 in the README's table).
 //!
 //! H = |p|²/2 + G q₂ on M = {|q|² = ℓ²} with ℓ = G = 1, started at rest at
 //! θ = 2 rad from the downward vertical (a large, nonlinear swing).
