@@ -1,5 +1,5 @@
-//! The table of claims: each claim of the paper (MISSION.md, "What the paper
-//! claims") next to what this run measured and the bound the theory gives.
+//! The table of claims: each claim of the paper (numbered as in the README's
+//! table "What the paper claims") next to what this run measured and the bound the theory gives.
 
 use std::fmt::Write as _;
 use std::fs;
@@ -47,7 +47,7 @@ fn num(v: f64) -> String {
 /// One row of the table.
 #[derive(Clone, Debug)]
 pub struct Claim {
-    /// The claim's number in MISSION.md's list, e.g. "8".
+    /// The claim's number in the README's table, e.g. "8".
     pub id: String,
     /// What is claimed, in a sentence.
     pub statement: String,
@@ -141,10 +141,14 @@ impl Claims {
         s
     }
 
-    /// Writes `claims.md` and `claims.csv` into `dir`.
-    pub fn save(&self, dir: &Path) -> std::io::Result<()> {
+    /// Writes `claims.md` (the preamble, then the table) and `claims.csv`
+    /// into `dir`.
+    pub fn save(&self, dir: &Path, preamble: &str) -> std::io::Result<()> {
         fs::create_dir_all(dir)?;
-        fs::write(dir.join("claims.md"), self.markdown())?;
+        fs::write(
+            dir.join("claims.md"),
+            format!("{preamble}{}", self.markdown()),
+        )?;
         let mut csv = String::from("id,statement,quantity,measured,bound,why,pass\n");
         for c in &self.rows {
             let q = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));

@@ -7,7 +7,9 @@
 //! Writes PNG, SVG and CSV figures and `claims.md` / `claims.csv` (claim,
 //! measured value, the bound the theory gives, pass/fail) into `DIR`
 //! (default `paper-output/`), and exits with status 1 if any claim fails.
-//! `--quick` runs shorter trajectories and fewer step sizes.
+//! `--quick` runs shorter trajectories and fewer step sizes. `claims.md`
+//! opens with a preamble saying what was run, where and when (commit, date,
+//! machine, command line), so a table found later can be traced to its run.
 
 mod claims;
 #[path = "../../tests/common/models.rs"]
@@ -15,6 +17,7 @@ mod models;
 mod plot;
 #[path = "../../tests/common/reference.rs"]
 mod reference;
+mod run_info;
 mod scenes;
 
 use std::path::PathBuf;
@@ -73,16 +76,19 @@ fn main() -> ExitCode {
         }
         println!("   ({:.1} s)", t.elapsed().as_secs_f64());
     }
-    if let Err(e) = claims.save(&ctx.out) {
+    let elapsed = start.elapsed().as_secs_f64();
+    let preamble = run_info::preamble(ctx.quick, elapsed);
+    if let Err(e) = claims.save(&ctx.out, &preamble) {
         eprintln!("could not write the claims table: {e}");
         return ExitCode::FAILURE;
     }
-    println!("\n{}", claims.markdown());
+    // Each claim was printed once, as it was checked; the table itself is in
+    // claims.md (printing it here again is what used to show every claim twice).
     println!(
-        "{} claims, {} failed, {:.1} s; figures and tables in {}",
+        "\n{} claims, {} failed, {:.1} s; claims.md, claims.csv and the figures are in {}",
         claims.len(),
         claims.failures(),
-        start.elapsed().as_secs_f64(),
+        elapsed,
         ctx.out.display()
     );
     if claims.all_pass() {

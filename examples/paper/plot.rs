@@ -15,6 +15,7 @@
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters_backend::{BackendColor, BackendCoord, DrawingErrorKind};
 use std::error::Error;
 use std::fmt::Write as _;
 use std::fs;
@@ -46,6 +47,10 @@ pub enum Mark {
     Points,
     /// Dots joined by a thin line.
     LinePoints,
+    /// One open circle per point (points drawn on top of another series).
+    Rings,
+    /// One large filled dot per point (a few marked points).
+    BigDots,
 }
 
 /// One named curve of a [`Figure`].
@@ -74,6 +79,12 @@ pub struct Figure {
     pub y_range: Option<(f64, f64)>,
     /// Where the legend sits (upper right unless it hides data).
     pub legend: SeriesLabelPosition,
+    /// Lines of text printed in a box at the lower left of the plot: what a
+    /// reader must know to read the figure (a caption that travels with it).
+    pub notes: Vec<String>,
+    /// Where the note box's top edge sits, as a fraction of the plot's
+    /// height from its top; `None`: the box sits at the bottom.
+    pub notes_top: Option<f64>,
 }
 
 /// A qualitative palette that stays readable in print.
@@ -103,7 +114,22 @@ impl Figure {
             x_range: None,
             y_range: None,
             legend: SeriesLabelPosition::UpperRight,
+            notes: Vec::new(),
+            notes_top: None,
         }
+    }
+
+    /// Puts the note box's top edge at `frac` of the plot's height from the
+    /// top (where the data leave room), instead of at the bottom.
+    pub fn notes_at(mut self, frac: f64) -> Self {
+        self.notes_top = Some(frac);
+        self
+    }
+
+    /// Adds a line to the note box drawn inside the plot (lower left).
+    pub fn note(mut self, line: &str) -> Self {
+        self.notes.push(line.to_string());
+        self
     }
 
     pub fn legend_at(mut self, pos: SeriesLabelPosition) -> Self {
@@ -263,8 +289,43 @@ impl Figure {
                 .filter(|(x, y)| x.is_finite() && y.is_finite())
                 .collect();
             let color = s.color;
+            let mark = s.mark;
+            // The swatch draws the series the way the plot does: a line, a
+            // dashed line, a dot, or a line through a dot.
             let legend = move |(x, y): (i32, i32)| {
-                PathElement::new(vec![(x, y), (x + 22, y)], color.stroke_width(3))
+                // One element type for every mark: three segments and a dot,
+                // the parts a mark does not use drawn transparent.
+                let none = RGBAColor(0, 0, 0, 0.0);
+                let seg = |a: i32, b: i32, w: u32, on: bool| {
+                    let c = if on { color.to_rgba() } else { none };
+                    PathElement::new(vec![(x + a, y), (x + b, y)], c.stroke_width(w))
+                };
+                let dashed = mark == Mark::Dashed;
+                let (solid, width) = match mark {
+                    Mark::Line => (true, 2),
+                    Mark::LinePoints => (true, 1),
+                    _ => (false, 1),
+                };
+                let dot = matches!(
+                    mark,
+                    Mark::Points | Mark::LinePoints | Mark::Rings | Mark::BigDots
+                );
+                let dot_color = if dot { color.to_rgba() } else { none };
+                let dot_style = if mark == Mark::Rings {
+                    dot_color.stroke_width(2)
+                } else {
+                    dot_color.filled()
+                };
+                EmptyElement::at((0, 0))
+                    + seg(0, 22, width, solid)
+                    + seg(0, 6, 2, dashed)
+                    + seg(9, 14, 2, dashed)
+                    + seg(17, 22, 2, dashed)
+                    + Circle::new(
+                        (x + 11, y),
+                        if mark == Mark::BigDots { 6 } else { 4 },
+                        dot_style,
+                    )
             };
             let anno = match s.mark {
                 Mark::Line => chart.draw_series(LineSeries::new(pts, color.stroke_width(2)))?,
@@ -277,6 +338,13 @@ impl Figure {
                 Mark::LinePoints => {
                     chart.draw_series(LineSeries::new(pts.clone(), color.stroke_width(1)))?;
                     chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))?
+                }
+                Mark::Rings => chart.draw_series(
+                    pts.iter()
+                        .map(|&p| Circle::new(p, 6, color.stroke_width(2))),
+                )?,
+                Mark::BigDots => {
+                    chart.draw_series(pts.iter().map(|&p| Circle::new(p, 9, color.filled())))?
                 }
             };
             // Helper strokes (arrow heads, guides) carry no name and no legend.
@@ -293,6 +361,44 @@ impl Figure {
                 .position(self.legend.clone())
                 .draw()?;
         }
+        if !self.notes.is_empty() {
+            let (xs, ys) = chart.plotting_area().get_pixel_range();
+            let font: TextStyle = ("sans-serif", 16).into_font().into();
+            let line_h = 21;
+            let width = self
+                .notes
+                .iter()
+                .map(|l| {
+                    root.estimate_text_size(l, &font)
+                        .map_or(0, |(w, _)| w as i32)
+                })
+                .max()
+                .unwrap_or(0);
+            let height = line_h * self.notes.len() as i32;
+            let x0 = xs.start + 10;
+            let (y0, y1) = match self.notes_top {
+                Some(f) => {
+                    let y0 = ys.start + (f * (ys.end - ys.start) as f64) as i32;
+                    (y0, y0 + height + 10)
+                }
+                None => (ys.end - 20 - height, ys.end - 10),
+            };
+            root.draw(&Rectangle::new(
+                [(x0, y0), (x0 + width + 16, y1)],
+                WHITE.mix(0.9).filled(),
+            ))?;
+            root.draw(&Rectangle::new(
+                [(x0, y0), (x0 + width + 16, y1)],
+                BLACK.stroke_width(1),
+            ))?;
+            for (k, l) in self.notes.iter().enumerate() {
+                root.draw(&Text::new(
+                    l.clone(),
+                    (x0 + 8, y0 + 6 + line_h * k as i32),
+                    font.clone(),
+                ))?;
+            }
+        }
         root.present()?;
         Ok(())
     }
@@ -303,7 +409,7 @@ impl Figure {
         let png = dir.join(format!("{stem}.png"));
         let svg = dir.join(format!("{stem}.svg"));
         let csv = dir.join(format!("{stem}.csv"));
-        self.draw(&BitMapBackend::new(&png, self.size).into_drawing_area())?;
+        self.draw(&Crisp(BitMapBackend::new(&png, self.size)).into_drawing_area())?;
         self.draw(&SVGBackend::new(&svg, self.size).into_drawing_area())?;
         fs::write(&csv, self.csv())?;
         Ok(vec![png, svg, csv])
@@ -312,6 +418,9 @@ impl Figure {
     /// The data in long form: one row per point, `series,x,y`.
     pub fn csv(&self) -> String {
         let mut out = format!("# {}\n", self.title);
+        for n in &self.notes {
+            let _ = writeln!(out, "# {n}");
+        }
         if self.log_x || self.log_y {
             let _ = writeln!(
                 out,
@@ -359,6 +468,25 @@ pub fn arrow(a: (f64, f64), b: (f64, f64), head: f64) -> Vec<(f64, f64)> {
     vec![a, b, left, b, right]
 }
 
+/// The largest |v| in each of `windows` equal windows of `t`, as (window
+/// end, max) points: a long oscillating record drawn as its envelope, so a
+/// figure shows growth or its absence instead of a solid band.
+pub fn envelope(t: &[f64], v: &[f64], windows: usize) -> Vec<(f64, f64)> {
+    let n = t.len().min(v.len());
+    if n == 0 || windows == 0 {
+        return Vec::new();
+    }
+    let per = n.div_ceil(windows);
+    (0..n)
+        .step_by(per)
+        .map(|a| {
+            let b = (a + per).min(n);
+            let m = v[a..b].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            (t[b - 1], m)
+        })
+        .collect()
+}
+
 /// Tick labels: plain numbers, or 1e-k on a log axis.
 fn axis_label(v: f64, log: bool) -> String {
     if log {
@@ -393,6 +521,8 @@ pub struct Heatmap {
     pub y_label: String,
     pub x_range: (f64, f64),
     pub y_range: (f64, f64),
+    /// What the colour means, written along the colour bar.
+    pub value_label: String,
     /// `values[j][i]`: row j (bottom to top), column i (left to right).
     pub values: Vec<Vec<f64>>,
     /// Horizontal dashed marker lines at these y values.
@@ -436,8 +566,11 @@ impl Heatmap {
         root.fill(&WHITE)?;
         let (x0, x1) = self.x_range;
         let (y0, y1) = self.y_range;
-        let mut chart = ChartBuilder::on(root)
-            .caption(&self.title, ("sans-serif", 24))
+        // Title across the whole width, then the image and its colour bar.
+        let body = root.titled(&self.title, ("sans-serif", 24))?;
+        let (w, _) = body.dim_in_pixel();
+        let (main, bar) = body.split_horizontally(w.saturating_sub(150));
+        let mut chart = ChartBuilder::on(&main)
             .margin(16)
             .x_label_area_size(52)
             .y_label_area_size(70)
@@ -478,6 +611,39 @@ impl Heatmap {
             let (xb, yb) = (xa + dx * stride as f64, ya + dy * stride as f64);
             Rectangle::new([(xa, ya), (xb, yb)], Self::color(v, vmax).filled())
         }))?;
+        // The colour bar: the same colour map, labelled in the values' units.
+        let mut scale = ChartBuilder::on(&bar)
+            .margin_top(16)
+            .margin_bottom(16 + 52)
+            .margin_left(8)
+            .set_label_area_size(LabelAreaPosition::Right, 80)
+            .margin_right(6)
+            .build_cartesian_2d(0.0..1.0, 0.0..vmax)?;
+        scale
+            .configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .axis_style(WHITE)
+            .y_desc(&self.value_label)
+            .label_style(("sans-serif", 15))
+            .axis_desc_style(("sans-serif", 18))
+            .y_label_formatter(&|v: &f64| axis_label(*v, false))
+            .draw()?;
+        let levels = 256;
+        scale.draw_series((0..levels).map(|k| {
+            let (a, b) = (
+                vmax * k as f64 / levels as f64,
+                vmax * (k + 1) as f64 / levels as f64,
+            );
+            Rectangle::new(
+                [(0.0, a), (0.75, b)],
+                Self::color(0.5 * (a + b), vmax).filled(),
+            )
+        }))?;
+        scale.draw_series(std::iter::once(Rectangle::new(
+            [(0.0, 0.0), (0.75, vmax)],
+            BLACK.stroke_width(1),
+        )))?;
         for &y in &self.dashed_y {
             chart.draw_series(DashedLineSeries::new(
                 vec![(x0, y), (x1, y)],
@@ -505,7 +671,10 @@ impl Heatmap {
         let png = dir.join(format!("{stem}.png"));
         let svg = dir.join(format!("{stem}.svg"));
         let csv = dir.join(format!("{stem}.csv"));
-        self.draw(&BitMapBackend::new(&png, self.size).into_drawing_area(), 1)?;
+        self.draw(
+            &Crisp(BitMapBackend::new(&png, self.size)).into_drawing_area(),
+            1,
+        )?;
         let cells = self.values.len() * self.values.first().map_or(0, Vec::len);
         let stride = ((cells as f64 / 40_000.0).sqrt().ceil() as usize).max(1);
         self.draw(
@@ -516,10 +685,11 @@ impl Heatmap {
         let (y0, y1) = self.y_range;
         let rows = self.values.len();
         let mut out = format!(
-            "# {}\n{},{},value\n",
+            "# {}\n{},{},{}\n",
             self.title,
             csv_field(&self.x_label),
-            csv_field(&self.y_label)
+            csv_field(&self.y_label),
+            csv_field(&self.value_label)
         );
         for (j, row) in self.values.iter().enumerate() {
             let cols = row.len();
@@ -531,5 +701,164 @@ impl Heatmap {
         }
         fs::write(&csv, out)?;
         Ok(vec![png, svg, csv])
+    }
+}
+
+/// A bitmap backend whose text is drawn glyph by glyph with ab_glyph at
+/// sub-pixel positions on one baseline.
+///
+/// plotters' own ab_glyph path rounds every glyph's offset to whole pixels
+/// separately (towards zero, so glyphs above and below the rounding point go
+/// different ways): letters with flat tops such as x, v and z sit a pixel high
+/// and some pairs drift apart ("SH AKE"). Everything but text is passed to the
+/// wrapped backend unchanged, and the text box (hence the layout) is the one
+/// plotters computes, so only the glyphs' placement changes.
+pub struct Crisp<B>(pub B);
+
+impl<B: DrawingBackend> DrawingBackend for Crisp<B> {
+    type ErrorType = B::ErrorType;
+
+    fn get_size(&self) -> (u32, u32) {
+        self.0.get_size()
+    }
+    fn ensure_prepared(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.ensure_prepared()
+    }
+    fn present(&mut self) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.present()
+    }
+    fn draw_pixel(
+        &mut self,
+        point: BackendCoord,
+        color: BackendColor,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_pixel(point, color)
+    }
+    fn draw_line<S: plotters_backend::BackendStyle>(
+        &mut self,
+        from: BackendCoord,
+        to: BackendCoord,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_line(from, to, style)
+    }
+    fn draw_rect<S: plotters_backend::BackendStyle>(
+        &mut self,
+        upper_left: BackendCoord,
+        bottom_right: BackendCoord,
+        style: &S,
+        fill: bool,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_rect(upper_left, bottom_right, style, fill)
+    }
+    fn draw_path<S: plotters_backend::BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        path: I,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_path(path, style)
+    }
+    fn draw_circle<S: plotters_backend::BackendStyle>(
+        &mut self,
+        center: BackendCoord,
+        radius: u32,
+        style: &S,
+        fill: bool,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.draw_circle(center, radius, style, fill)
+    }
+    fn fill_polygon<S: plotters_backend::BackendStyle, I: IntoIterator<Item = BackendCoord>>(
+        &mut self,
+        vert: I,
+        style: &S,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.fill_polygon(vert, style)
+    }
+    fn blit_bitmap(
+        &mut self,
+        pos: BackendCoord,
+        iwh: (u32, u32),
+        src: &[u8],
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        self.0.blit_bitmap(pos, iwh, src)
+    }
+    fn estimate_text_size<TStyle: plotters_backend::BackendTextStyle>(
+        &self,
+        text: &str,
+        style: &TStyle,
+    ) -> Result<(u32, u32), DrawingErrorKind<Self::ErrorType>> {
+        self.0.estimate_text_size(text, style)
+    }
+
+    fn draw_text<TStyle: plotters_backend::BackendTextStyle>(
+        &mut self,
+        text: &str,
+        style: &TStyle,
+        pos: BackendCoord,
+    ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
+        use ab_glyph::{Font, FontRef, ScaleFont};
+        use plotters_backend::text_anchor::{HPos, VPos};
+        let color = style.color();
+        if color.alpha == 0.0 {
+            return Ok(());
+        }
+        let font = FontRef::try_from_slice(dejavu::sans::regular())
+            .map_err(|e| DrawingErrorKind::FontError(Box::new(e)))?;
+        let size = style.size() as f32;
+        let scaled = font.as_scaled(size);
+        // The same box plotters lays out (advances plus kerning, height
+        // size/1.24), with the baseline where plotters puts it (size/2 below
+        // the top), so titles and tick labels keep their places.
+        let (w, h) = self.estimate_text_size(text, style)?;
+        let (w, h) = (w as f32, h as f32);
+        let dx = match style.anchor().h_pos {
+            HPos::Left => 0.0,
+            HPos::Right => -w,
+            HPos::Center => -w / 2.0,
+        };
+        let dy = match style.anchor().v_pos {
+            VPos::Top => 0.0,
+            VPos::Center => -h / 2.0,
+            VPos::Bottom => -h,
+        };
+        let baseline = dy + size / 2.0;
+        let trans = style.transform();
+        let (width, height) = self.get_size();
+        let mut x = dx;
+        let mut prev = None;
+        for c in text.chars() {
+            let id = scaled.glyph_id(c);
+            if let Some(p) = prev {
+                x += scaled.kern(p, id);
+            }
+            prev = Some(id);
+            let glyph = id.with_scale_and_position(size, ab_glyph::point(x, baseline));
+            x += scaled.h_advance(id);
+            let Some(outline) = font.outline_glyph(glyph) else {
+                continue;
+            };
+            let b = outline.px_bounds();
+            let mut result = Ok(());
+            outline.draw(|gx, gy, coverage| {
+                if result.is_err() || coverage <= 0.0 {
+                    return;
+                }
+                let (px, py) = (b.min.x as i32 + gx as i32, b.min.y as i32 + gy as i32);
+                let (tx, ty) = trans.transform(px, py);
+                let (tx, ty) = (pos.0 + tx, pos.1 + ty);
+                if tx >= 0 && ty >= 0 && (tx as u32) < width && (ty as u32) < height {
+                    let a = color.alpha * f64::from(coverage.min(1.0));
+                    result = self.0.draw_pixel(
+                        (tx, ty),
+                        BackendColor {
+                            alpha: a,
+                            rgb: color.rgb,
+                        },
+                    );
+                }
+            });
+            result?;
+        }
+        Ok(())
     }
 }

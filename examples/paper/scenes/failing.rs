@@ -1,4 +1,4 @@
-//! Failing nondegeneracy, Section 5.2 (claim 5 of MISSION.md).
+//! Failing nondegeneracy, Section 5.2 (claim 5 in the README's table).
 //!
 //! The paper's two systems on R⁴ with g = q̄: H = p²/2 + p̄ q, for which
 //! N = {{H,g},g} ≡ 0 (H is linear along the fibre; the problem has index 5),
@@ -99,7 +99,7 @@ fn refused<S: ConstrainedSystem + Clone>(
         "typed errors / attempts",
         typed(integ.project_to_hidden(z)),
         Bound::AtLeast(1.0),
-        "N singular: M^H is not a symplectic manifold here (Thm 2.3)",
+        "N singular: Mᴴ is not a symplectic manifold here (Thm 2.3)",
     );
     if step_too {
         let mut shake = Integrator::new(sys, ImplicitMidpoint, h).shake();

@@ -1,5 +1,5 @@
 //! The harmonic (Hopf) constraint with H = |p|²/2, the paper's Section 5.4.1
-//! (claim 7 of MISSION.md).
+//! (claim 7 in the README's table).
 //!
 //! g = |q|² + |p|² − 1 on R⁴ = C² (z_k = q_k + i p_k), H = |p|²/2, SHAKE and
 //! RATTLE over the implicit midpoint rule. The fibres are the great circles
@@ -9,7 +9,7 @@
 //! `tests/common/reference.rs`, which shares no code with shake.
 //!
 //! - **The multiplier** (eq hopf_lambda): λ_paper = |p|²/(|q|² − |p|²). The
-//!   paper writes q' = (1 + λ)p; MISSION's convention q' = H_p + g_pᵀλ with
+//!   paper writes q' = (1 + λ)p; our convention q' = H_p + g_pᵀλ with
 //!   g_p = 2p gives λ = λ_paper/2. It is checked against the multiplier of the
 //!   index-reduced DAE (N λ = {{g,H},H}, from num-dual derivatives), and
 //!   against the runtime: the whole displacement along the fibres of one
@@ -44,7 +44,7 @@ use lab::{FreeRun, Z};
 use nalgebra::DVector;
 
 use crate::claims::{Bound, Claims};
-use crate::plot::{Figure, Mark, PlotResult, PALETTE};
+use crate::plot::{envelope, Figure, Mark, PlotResult, PALETTE};
 use crate::reference as r;
 use crate::Ctx;
 use plotters::prelude::SeriesLabelPosition;
@@ -74,7 +74,7 @@ fn exact_solution(claims: &mut Claims) {
     }
     claims.check(
         "7",
-        "H = |p|²/2: the exact solution (eq hopf_dea_exact_solution) with α = −sign(q0∧p0)|p0|/|q0| solves the DAE, on both components of M^H and for both orientations",
+        "H = |p|²/2: the exact solution (eq hopf_dea_exact_solution) with α = −sign(q0∧p0)|p0|/|q0| solves the DAE, on both components of Mᴴ and for both orientations",
         "max |formula − reference DAE solution|, t ≤ 3, 4 initial data",
         right,
         Bound::AtMost(1e-11),
@@ -82,7 +82,7 @@ fn exact_solution(claims: &mut Claims) {
     );
     claims.check(
         "7",
-        "the sign of α is set by the orientation of q0∧p0, not by the component of M^H: the other sign is wrong on both components",
+        "the sign of α is set by the orientation of q0∧p0, not by the component of Mᴴ: the other sign is wrong on both components",
         "min |formula with −α − reference|, same data",
         wrong,
         Bound::AtLeast(0.1),
@@ -115,7 +115,7 @@ fn multiplier(claims: &mut Claims) -> PlotResult<()> {
     }
     claims.check(
         "7",
-        "eq hopf_lambda: λ = |p|²/(2(|q|²−|p|²)) (= λ_paper/2, MISSION's scaling) is the multiplier of the DAE",
+        "eq hopf_lambda: λ = |p|²/(2(|q|²−|p|²)) (= λ_paper/2 in our convention q' = H_p + g_pᵀλ) is the multiplier of the DAE",
         "max relative |formula − reference multiplier (N λ = {{g,H},H})|",
         formula_err,
         Bound::AtMost(1e-14),
@@ -223,15 +223,16 @@ fn on_the_trajectory(ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
         Mark::Line,
         PALETTE[4],
     )
+    // Round-off is noise: drawn as its envelope (largest value per window).
     .series_colored(
-        "distance of z_k to the exact trajectory, h = 0.1",
-        pts(a, &a.curve_distance),
+        "distance of z_k to the exact trajectory, h = 0.1 (max per window)",
+        envelope(&a.t, &a.curve_distance, 200),
         Mark::Line,
         PALETTE[0],
     )
     .series_colored(
-        "distance of z_k to the exact trajectory, h = 0.05",
-        pts(b, &b.curve_distance),
+        "distance of z_k to the exact trajectory, h = 0.05 (max per window)",
+        envelope(&b.t, &b.curve_distance, 200),
         Mark::Line,
         PALETTE[5],
     )
@@ -352,7 +353,7 @@ fn fibre_figures(ctx: &Ctx) -> PlotResult<()> {
     let view = |x: &Z| (dot4(x, &a), dot4(x, &b));
     let grey = plotters::style::RGBColor(200, 200, 200);
     let mut fig = Figure::new(
-        "A fibre of the Hopf constraint meets M^H in four points (S³, orthographic view)",
+        "A fibre of the Hopf constraint meets Mᴴ in four points (S³, orthographic view)",
         "z·z0",
         "z·b  (b ⊥ z0, chosen to separate the circles)",
     )
@@ -391,22 +392,17 @@ fn fibre_figures(ctx: &Ctx) -> PlotResult<()> {
             Mark::Dashed,
             PALETTE[1],
         );
-    let rad = 0.025;
     fig = dots(
         fig,
-        "fibre ∩ M^H: ±z0",
+        "fibre ∩ Mᴴ: ±z0",
         PALETTE[0],
         &[view(&z0), view(&neg(&z0))],
-        rad,
-        rad,
     );
     fig = dots(
         fig,
-        "fibre ∩ M^H: ±z1",
+        "fibre ∩ Mᴴ: ±z1",
         PALETTE[1],
         &[view(&z1), view(&neg(&z1))],
-        rad,
-        rad,
     );
     fig.save(&ctx.out, "hopf_free_fibre")?;
 
@@ -424,10 +420,8 @@ fn fibre_figures(ctx: &Ctx) -> PlotResult<()> {
             .map(|&t| (t / (2.0 * PI), h_of(&r::fibre_point(&z0, t))))
             .collect()
     };
-    // Dots of about 8 pixels on a 900×600 figure.
     let (h_min, h_max) = (h_of(&z0), h_of(&z1));
     let span = h_max - h_min;
-    let (rx, ry) = (0.011, 0.016 * 1.4 * span);
     let fig = Figure::new(
         "H = |p|²/2 along the fibre through z0 = (q0, p0), |q0| > |p0|",
         "fibre angle θ/2π  (point q cos θ + p sin θ, −q sin θ + p cos θ)",
@@ -441,44 +435,23 @@ fn fibre_figures(ctx: &Ctx) -> PlotResult<()> {
         "minima ±z0: the trajectory through z0",
         PALETTE[0],
         &mark([0.0, PI]),
-        rx,
-        ry,
     );
     let fig = dots(
         fig,
-        "maxima ±(p0, −q0): the other component of M^H",
+        "maxima ±(p0, −q0): the other component of Mᴴ",
         PALETTE[1],
         &mark([PI / 2.0, 1.5 * PI]),
-        rx,
-        ry,
     );
     fig.save(&ctx.out, "hopf_free_fibre_energy")?;
     Ok(())
 }
 
-/// Marks points with filled dots of radii (rx, ry) in data units (the
-/// figure's own dots are 2 pixels): concentric rings, one series each, the
-/// first carrying the legend entry.
+/// Marks a few points with large filled dots, one legend entry.
 pub(super) fn dots(
-    mut fig: Figure,
+    fig: Figure,
     name: &str,
     color: plotters::style::RGBColor,
     pts: &[(f64, f64)],
-    rx: f64,
-    ry: f64,
 ) -> Figure {
-    let mut first = true;
-    for &(x, y) in pts {
-        for s in [0.25, 0.5, 0.75, 1.0] {
-            let ring: Vec<(f64, f64)> = (0..=36)
-                .map(|k| {
-                    let a = 2.0 * PI * k as f64 / 36.0;
-                    (x + s * rx * a.cos(), y + s * ry * a.sin())
-                })
-                .collect();
-            fig = fig.series_colored(if first { name } else { "" }, ring, Mark::Line, color);
-            first = false;
-        }
-    }
-    fig
+    fig.series_colored(name, pts.to_vec(), Mark::BigDots, color)
 }

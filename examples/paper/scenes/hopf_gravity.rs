@@ -1,5 +1,5 @@
 //! The harmonic constraint with a linear potential, the paper's Section
-//! 5.4.2 (claims 8 and 9 of MISSION.md).
+//! 5.4.2 (claims 8 and 9 in the README's table).
 //!
 //! H = |p|²/2 − g·q with g = (0, −1) on the sphere |q|² + |p|² = r², SHAKE
 //! and RATTLE over the implicit midpoint rule with h = 0.1, from the paper's
@@ -45,8 +45,6 @@
 //! direction. The runtime must stop there with a typed error and must not
 //! hand back a state from another branch of M^H.
 
-use std::f64::consts::PI;
-
 use plotters::prelude::SeriesLabelPosition;
 use shake::{Method, Options};
 
@@ -63,7 +61,7 @@ pub fn run(ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
     let paper = lab::paper_starts();
     let unit = lab::unit_starts()?;
     println!(
-        "   the table's points lie on |z|² = {:.11} (0.98 to the printed digits, not 1): each is run there, and again on the unit M^H",
+        "   the table's points lie on |z|² = {:.11} (0.98 to the printed digits, not 1): each is run there, and again on the unit Mᴴ",
         paper[0].radius2
     );
     let exactness = lab::unconstrained_midpoint_error(&paper[0], H, 100);
@@ -107,7 +105,7 @@ fn trajectories(
                 if set == "printed" {
                     "the paper's table"
                 } else {
-                    "the table on the unit M^H"
+                    "the table on the unit Mᴴ"
                 },
                 starts[0].radius2
             ),
@@ -116,7 +114,13 @@ fn trajectories(
         )
         .equal_aspect()
         .size(900, 900)
-        .legend_at(SeriesLabelPosition::UpperMiddle);
+        .legend_at(SeriesLabelPosition::UpperMiddle)
+        // The paper's caption calls z_a's curve the innermost; with the
+        // caption's own projection it is the outermost (it is innermost after
+        // projecting from the other pole, w ↦ 1/w̄). Say so where it is seen.
+        .note("z_a is the OUTERMOST curve here (blue), z_c the innermost.")
+        .note("The paper's caption calls z_a innermost: that holds after")
+        .note("projecting from the other pole (w ↦ 1/w̄). Same orbits.");
         for (i, s) in starts.iter().enumerate() {
             let color = PALETTE[i];
             let mut projected: Vec<Vec<(f64, f64)>> = Vec::new();
@@ -166,13 +170,12 @@ fn trajectories(
                 } else {
                     // SHAKE's points coincide with RATTLE's (same fibres):
                     // ring its first period.
-                    let first = &pts[..=(c.period / H) as usize];
-                    fig = rings(
-                        fig,
+                    let first = pts[..=(c.period / H) as usize].to_vec();
+                    fig = fig.series_colored(
                         &format!("{label}: SHAKE, first period"),
-                        color,
                         first,
-                        0.045,
+                        Mark::Rings,
+                        color,
                     );
                 }
             }
@@ -184,7 +187,7 @@ fn trajectories(
     }
     claims.check(
         "8",
-        "gravity, h = 0.1, z_a z_b z_c (printed on |z|² = 0.98, and on the unit M^H): the projected SHAKE and RATTLE trajectories are closed",
+        "gravity, h = 0.1, z_a z_b z_c (printed on |z|² = 0.98, and on the unit Mᴴ): the projected SHAKE and RATTLE trajectories are closed",
         "max over runs and periods of |return point − start| / curve size",
         worst,
         Bound::AtMost(H * H),
@@ -212,26 +215,6 @@ fn exact_curve(s: &GravityStart, t_end: f64) -> (Vec<f64>, Vec<Z>) {
         .map(|v| [v[0], v[1], v[2], v[3]])
         .collect();
     (times, zs)
-}
-
-/// Open circles of radius `rad` around points.
-fn rings(
-    mut fig: Figure,
-    name: &str,
-    color: plotters::style::RGBColor,
-    pts: &[(f64, f64)],
-    rad: f64,
-) -> Figure {
-    for (k, &(x, y)) in pts.iter().enumerate() {
-        let ring: Vec<(f64, f64)> = (0..=24)
-            .map(|j| {
-                let a = 2.0 * PI * j as f64 / 24.0;
-                (x + rad * a.cos(), y + rad * a.sin())
-            })
-            .collect();
-        fig = fig.series_colored(if k == 0 { name } else { "" }, ring, Mark::Line, color);
-    }
-    fig
 }
 
 // ---------------------------------------------------------------------------
@@ -280,7 +263,7 @@ fn energy_and_constraints(ctx: &Ctx, claims: &mut Claims, za: &GravityStart) -> 
         .map(|z| lab::predicted_shake_hidden(&rs, z, H))
         .collect();
     Figure::new(
-        "Constraints from z_a, h = 0.1: SHAKE stays O(h) off M^H, RATTLE on it",
+        "Constraints from z_a, h = 0.1: SHAKE stays O(h) off Mᴴ, RATTLE on it",
         "time t",
         "residual (exact zeros drawn at 1e-18)",
     )
@@ -426,16 +409,17 @@ fn fibres(ctx: &Ctx, claims: &mut Claims, za: &GravityStart) -> PlotResult<()> {
         cases[lab::crossings(z).min(4)] += 1;
     }
     println!(
-        "   fibres above the SHAKE run from z_a: {} meet M^H 4 times (case i), {} twice (case ii), {} three times (case iii)",
+        "   fibres above the SHAKE run from z_a: {} meet Mᴴ 4 times (case i), {} twice (case ii), {} three times (case iii)",
         cases[4], cases[2], cases[3]
     );
     Heatmap {
-        title: "|H'(θ)| on the fibres above SHAKE from z_a: black where a fibre meets M^H".into(),
+        title: "|H'(θ)| on the fibres above SHAKE from z_a: black where a fibre meets Mᴴ".into(),
         x_label: "time t (a column per step, h = 0.1; dashed: the fibre at t = 3, four crossings)"
             .into(),
         y_label: "fibre coordinate θ/2π (dashed: the SHAKE point)".into(),
         x_range,
         y_range: (-0.5, 0.5),
+        value_label: "|H'(θ)| = |dH/dθ| along the fibre".into(),
         values: lab::fibre_image(&shake.z, 500, -0.5, 0.5),
         dashed_y: vec![0.0],
         dashed_x: vec![3.0],
@@ -444,11 +428,12 @@ fn fibres(ctx: &Ctx, claims: &mut Claims, za: &GravityStart) -> PlotResult<()> {
     .save(&ctx.out, "hopf_fibres")?;
     let zoom_cols = 30;
     Heatmap {
-        title: "Zoom: SHAKE (dashed) stays off M^H (black) after the first step".into(),
+        title: "Zoom: SHAKE (dashed) stays off Mᴴ (black) after the first step".into(),
         x_label: "time t".into(),
         y_label: "fibre coordinate θ/2π".into(),
         x_range: (-0.5 * H, zoom_cols as f64 * H + 0.5 * H),
         y_range: (-0.02, 0.06),
+        value_label: "|H'(θ)| = |dH/dθ| along the fibre".into(),
         values: lab::fibre_image(&shake.z[..=zoom_cols], 320, -0.02, 0.06),
         dashed_y: vec![0.0],
         dashed_x: vec![],
@@ -470,8 +455,8 @@ fn fibres(ctx: &Ctx, claims: &mut Claims, za: &GravityStart) -> PlotResult<()> {
     }
     claims.check(
         "8",
-        "fig_fibres: SHAKE stays off M^H along its fibre after the first step, by the predicted angle",
-        "min over steps of (fibre angle to M^H) / (h|{{g,H},H}|/|N|)",
+        "fig_fibres: SHAKE stays off Mᴴ along its fibre after the first step, by the predicted angle",
+        "min over steps of (fibre angle to Mᴴ) / (h|{{g,H},H}|/|N|)",
         lo,
         Bound::Within(0.8, 1.25),
         "1 + O(h): half the exact fibre displacement, 2μ = hλ",
@@ -486,7 +471,7 @@ fn fibres(ctx: &Ctx, claims: &mut Claims, za: &GravityStart) -> PlotResult<()> {
     );
     claims.check(
         "8",
-        "fig_fibres: the fibres above the z_a trajectory meet M^H in 4 points (case i) and in 2 (case ii)",
+        "fig_fibres: the fibres above the z_a trajectory meet Mᴴ in 4 points (case i) and in 2 (case ii)",
         "number of steps whose fibre shows the rarer of the two cases",
         cases[4].min(cases[2]) as f64,
         Bound::AtLeast(1.0),
@@ -563,7 +548,7 @@ fn fold(ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
     }
     claims.check(
         "9",
-        "case (iii): a RATTLE run into a fold of M^H (h = ±0.1, ±0.05; default and project_every_step) stops with a typed error",
+        "case (iii): a RATTLE run into a fold of Mᴴ (h = ±0.1, ±0.05; default and project_every_step) stops with a typed error",
         "runs (of 8) that end without NondegeneracyLost/ComponentJump/FibreJump/NewtonNotConverged",
         untyped as f64,
         Bound::AtMost(0.0),
@@ -571,7 +556,7 @@ fn fold(ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
     );
     claims.check(
         "9",
-        "… and never hands back a state from another branch of M^H (a silent jump)",
+        "… and never hands back a state from another branch of Mᴴ (a silent jump)",
         "stored states, over the 8 runs, not the continuation of the previous one (sign of N, distance to the exact step)",
         off_branch as f64,
         Bound::AtMost(0.0),

@@ -10,7 +10,7 @@
 //! `crate::reference` (the scene declares it there; the test crate imports
 //! `common::reference` under that name).
 //!
-//! Conventions are MISSION.md's: z = (q₀, q₁, p₀, p₁), X_F = (F_p, −F_q),
+//! Conventions (those of shake_runtime::system): z = (q₀, q₁, p₀, p₁), X_F = (F_p, −F_q),
 //! {F,G} = F_q·G_p − F_p·G_q, q' = H_p + g_pᵀλ, p' = −H_q − g_qᵀλ. With
 //! g = |q|² + |p|² − r², X_g = (2p, −2q), so the fibre flow exp(σX_g) is the
 //! rotation z_k ↦ e^{−2iσ} z_k of z_k = q_k + i p_k, and the paper's multiplier
@@ -309,7 +309,7 @@ pub fn unit_starts() -> Result<Vec<GravityStart>, StepError> {
         let scaled = [k * z[0], k * z[1], k * z[2], k * z[3]];
         let on = integ.project_to_hidden(&state(&scaled))?;
         Ok(GravityStart {
-            name: format!("{name} (on the unit M^H)"),
+            name: format!("{name} (on the unit Mᴴ)"),
             z: arr(&on),
             radius2: 1.0,
         })

@@ -1,4 +1,4 @@
-//! Index-1 constraints, Section 5.3 (claim 6 of MISSION.md).
+//! Index-1 constraints, Section 5.3 (claim 6 in the README's table).
 //!
 //! On the extended space (q, α, p, β) with the holonomic constraint α = 0,
 //! midpoint SHAKE moves along the fibre (β ↦ β − λ) and then applies the
