@@ -7,6 +7,7 @@
 //! never sees the out-of-range index of the other branch.
 
 use crate::parse::{BinOp, CmpOp, Cond, ConstraintDecl, Dof, Expr, ExprKind, SystemDef};
+use crate::simplify::MAX_EXPONENT;
 use crate::symbolic::{Func, Graph, Names, NodeId, ParamId, VarId};
 use proc_macro2::Span;
 use std::collections::HashMap;
@@ -196,6 +197,27 @@ impl Lowerer {
         Ok(a..b)
     }
 
+    /// Refuses a power x^n with |n| > [`MAX_EXPONENT`], written or made by
+    /// merging (`x^a · x^b`), at the operator that made it.
+    fn exponent_ok(&self, node: NodeId, e: &Expr) -> Result<NodeId, Error> {
+        let n = self.graph.max_exponent(node);
+        if n > MAX_EXPONENT {
+            let shown = if n == u32::MAX {
+                "beyond 4·10^9".to_string()
+            } else {
+                n.to_string()
+            };
+            return Err(Error::new(
+                e.span,
+                format!(
+                    "exponent too large: this makes a power with |exponent| {shown}, above the limit of \
+                     {MAX_EXPONENT} (x^n over- or underflows f64 for every |x| outside [0.5, 2] there)"
+                ),
+            ));
+        }
+        Ok(node)
+    }
+
     /// Lowers a real-valued expression into the graph.
     fn real(&mut self, e: &Expr) -> Result<NodeId, Error> {
         Ok(match &e.kind {
@@ -263,7 +285,7 @@ impl Lowerer {
             ExprKind::Binary(op, a, b) => {
                 let x = self.real(a)?;
                 let y = self.real(b)?;
-                match op {
+                let r = match op {
                     BinOp::Add => self.graph.add2(x, y),
                     BinOp::Sub => self.graph.sub(x, y),
                     BinOp::Mul => self.graph.mul2(x, y),
@@ -295,7 +317,8 @@ impl Lowerer {
                                  write `exp(y * ln(x))` for a variable exponent",
                         )),
                     },
-                }
+                };
+                self.exponent_ok(r, e)?
             }
             ExprKind::Call(f, args) => {
                 let name = f.to_string();
@@ -384,11 +407,39 @@ impl Lowerer {
     }
 }
 
+/// The deepest expression graph a `let` may make (the longest chain of
+/// operations from it down to q, p or a parameter). Only `let`s that build
+/// on each other reach it: an expression alone is at most
+/// [`crate::parse::MAX_NESTING`] deep. Every pass is linear in the graph,
+/// but the generated code grows with the depth times the number of
+/// derivatives; 2000 nested `let`s already take seconds to expand.
+pub const MAX_LET_DEPTH: u32 = 1000;
+
+fn shallow(graph: &Graph, v: NodeId, name: &Ident) -> Result<NodeId, Error> {
+    if graph.height(v) > MAX_LET_DEPTH {
+        return Err(Error::new(
+            name.span(),
+            format!(
+                "`{name}` is nested too deeply: its expression is a chain of {} operations through \
+                 the `let`s before it, more than the limit of {MAX_LET_DEPTH}",
+                graph.height(v)
+            ),
+        ));
+    }
+    Ok(v)
+}
+
 /// Builds the symbolic system; returns every error found (one per
 /// offending item), not just the first.
 pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
+    lower_with(def, false)
+}
+
+/// [`lower`] into a graph that keeps products and powers of sums factored
+/// (`factored = true`: the values of the emitted code).
+pub fn lower_with(def: &SystemDef, factored: bool) -> Result<System, Vec<Error>> {
     let mut lw = Lowerer {
-        graph: Graph::default(),
+        graph: Graph::new(factored),
         dof: 0,
         syms: HashMap::new(),
         indices: Vec::new(),
@@ -453,7 +504,19 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
         return Err(errors);
     }
     for (n, e) in &def.lets {
-        match lw.real(e).and_then(|v| lw.declare(n, Sym::Let(v))) {
+        let v = match lw.real(e) {
+            Ok(v) => v,
+            Err(e) => {
+                errors.push(e);
+                continue;
+            }
+        };
+        // Too deep: the `let`s after it would only add a cascade of errors.
+        if let Err(e) = shallow(&lw.graph, v, n) {
+            errors.push(e);
+            return Err(errors);
+        }
+        match lw.declare(n, Sym::Let(v)) {
             Ok(()) => {}
             Err(e) => errors.push(e),
         }
