@@ -84,6 +84,18 @@ impl Lowerer {
         Ok(())
     }
 
+    /// ` (did you mean `x`?)` for the nearest declared name of the wanted
+    /// kind, or bound index, within a few edits.
+    fn did_you_mean(&self, name: &str, kind: impl Fn(&Sym) -> bool) -> String {
+        let declared = self
+            .syms
+            .iter()
+            .filter(|(_, (s, _))| kind(s))
+            .map(|(n, _)| n.as_str());
+        let bound = self.indices.iter().map(|(n, _)| n.as_str());
+        suggestion(name, declared.chain(bound))
+    }
+
     fn lookup_index(&self, name: &str) -> Option<i64> {
         self.indices
             .iter()
@@ -129,7 +141,10 @@ impl Lowerer {
                         None => {
                             return Err(Error::new(
                                 id.span(),
-                                format!("unknown index `{name}`: not a `const` or a bound index"),
+                                format!(
+                                    "unknown index `{name}`: not a `const` or a bound index{}",
+                                    self.did_you_mean(&name, |s| matches!(s, Sym::Number(_)))
+                                ),
                             ))
                         }
                     }
@@ -245,7 +260,8 @@ impl Lowerer {
                             id.span(),
                             format!(
                                 "unknown symbol `{name}`: not a parameter, coordinate, momentum, \
-                                 `let`, `const` or bound index"
+                                 `let`, `const` or bound index{}",
+                                self.did_you_mean(&name, |s| !matches!(s, Sym::Array(_)))
                             ),
                         ))
                     }
@@ -261,7 +277,10 @@ impl Lowerer {
                     None => {
                         return Err(Error::new(
                             id.span(),
-                            format!("unknown array `{name}`: the state arrays are the ones declared by `dof`"),
+                            format!(
+                                "unknown array `{name}`: the state arrays are the ones declared by `dof`{}",
+                                self.did_you_mean(&name, |s| matches!(s, Sym::Array(_)))
+                            ),
                         ))
                     }
                 };
@@ -344,7 +363,10 @@ impl Lowerer {
                     _ => {
                         return Err(Error::new(
                             f.span(),
-                            format!("unknown function `{name}`: the supported functions are {FUNCS}"),
+                            format!(
+                                "unknown function `{name}`: the supported functions are {FUNCS}{}",
+                                suggestion(&name, FUNCS.split(", "))
+                            ),
                         ))
                     }
                 };
@@ -407,6 +429,54 @@ impl Lowerer {
     }
 }
 
+/// The edit distance between two names, in characters: insertions,
+/// deletions, substitutions and transpositions of neighbours (`cso` is one
+/// edit from `cos`), the optimal-string-alignment variant of Damerau's.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let (a, b): (Vec<char>, Vec<char>) = (a.chars().collect(), b.chars().collect());
+    let w = b.len() + 1;
+    let mut d = vec![0usize; (a.len() + 1) * w];
+    for i in 0..=a.len() {
+        for j in 0..=b.len() {
+            d[i * w + j] = if i == 0 || j == 0 {
+                i + j
+            } else {
+                let cost = usize::from(a[i - 1] != b[j - 1]);
+                let mut v = (d[(i - 1) * w + j] + 1)
+                    .min(d[i * w + j - 1] + 1)
+                    .min(d[(i - 1) * w + j - 1] + cost);
+                if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                    v = v.min(d[(i - 2) * w + j - 2] + 1);
+                }
+                v
+            };
+        }
+    }
+    d[a.len() * w + b.len()]
+}
+
+/// ` (did you mean `x`?)` for the candidate nearest to `name`, if it is
+/// within a third of the name's length in edits (at least one; case
+/// differences count as edits), else "". Ties go to the first in sorted order, so
+/// the message does not depend on hash order.
+fn suggestion<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
+    let limit = (name.chars().count() / 3).max(1);
+    let mut best: Option<(usize, &str)> = None;
+    for c in candidates {
+        let d = edit_distance(&name.to_lowercase(), &c.to_lowercase())
+            + usize::from(name.to_lowercase() == c.to_lowercase() && name != c);
+        let better = match best {
+            None => true,
+            Some(b) => (d, c) < b,
+        };
+        if d <= limit && d > 0 && better {
+            best = Some((d, c));
+        }
+    }
+    best.map(|(_, c)| format!(" (did you mean `{c}`?)"))
+        .unwrap_or_default()
+}
+
 /// The deepest expression graph a `let` may make (the longest chain of
 /// operations from it down to q, p or a parameter). Only `let`s that build
 /// on each other reach it: an expression alone is at most
@@ -447,6 +517,18 @@ pub fn lower_with(def: &SystemDef, factored: bool) -> Result<System, Vec<Error>>
     let mut errors = Vec::new();
     let mut names = Names::default();
     for (i, p) in def.params.iter().enumerate() {
+        let name = p.to_string();
+        if name.chars().any(char::is_uppercase) {
+            errors.push(Error::new(
+                p.span(),
+                format!(
+                    "parameter `{name}` is not snake_case: parameters become fields of the struct and \
+                     arguments of `new`, where a capitalised name draws `non_snake_case` warnings and is \
+                     read as a pattern if a constant of that name is in scope (E0005); write `{}`",
+                    name.to_lowercase()
+                ),
+            ));
+        }
         if let Err(e) = lw.declare(p, Sym::Param(ParamId(i as u32))) {
             errors.push(e);
         }

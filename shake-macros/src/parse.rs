@@ -488,6 +488,11 @@ fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
             span,
         });
     }
+    if input.peek(Token![*]) {
+        // `x ** 2` reaches here at the second `*`.
+        return Err(input
+            .error("`**` is not an operator of the grammar: write `^` for a power, as in `x^2`"));
+    }
     Err(input.error("expected an expression: a number, a name, `q[i]`, `f(x)`, `(..)`, `sum i in a..b { .. }` or `if .. { .. } else { .. }`"))
 }
 

@@ -486,3 +486,36 @@ fn emission_keeps_products_of_sums_factored() {
     );
     assert!(!shown(&canon).contains('('), "{}", shown(&canon));
 }
+
+/// Friendly errors (issue 14): did-you-mean, `**`, capitalised parameters.
+#[test]
+fn friendly_errors() {
+    let base = |h: &str| {
+        format!(
+            "struct S {{ parameters {{ length, gravity }} coordinates x, y; momenta px, py; \
+             hamiltonian = {h}; constraints {{ rod: x^2 + y^2 - length^2 }} }}"
+        )
+    };
+    let cases = [
+        (base("px^2 + gravty * y"), "did you mean `gravity`?"),
+        (base("pxx^2 + gravity * y"), "did you mean `px`?"),
+        (base("px^2 + Gravity * y"), "did you mean `gravity`?"),
+        (base("px^2 - cso(x)"), "did you mean `cos`?"),
+        (base("px**2"), "write `^` for a power"),
+        (
+            "struct S { parameters { L } dof q[1], p[1]; hamiltonian = p[0]^2 + L * q[0]; }"
+                .to_string(),
+            "parameter `L` is not snake_case",
+        ),
+    ];
+    for (src, msg) in cases {
+        let out = crate::expand(src.parse().expect("tokens")).to_string();
+        assert!(out.contains(msg), "{msg}: {out:.400}");
+    }
+    // Nothing near: no suggestion.
+    let out = crate::expand(base("px^2 + zzzzzz").parse().expect("tokens")).to_string();
+    assert!(
+        out.contains("unknown symbol") && !out.contains("did you mean"),
+        "{out:.300}"
+    );
+}
