@@ -360,6 +360,16 @@ impl Lowerer {
                     "log" => {
                         return Err(Error::new(f.span(), "`log` is ambiguous: write `ln` for the natural logarithm"))
                     }
+                    "sinh" | "cosh" | "tanh" => {
+                        return Err(Error::new(
+                            f.span(),
+                            format!(
+                                "unknown function `{name}`: write the hyperbolic functions with `exp` \
+                                 (sinh(x) = (exp(x) - exp(-x)) / 2, cosh(x) = (exp(x) + exp(-x)) / 2, \
+                                 tanh(x) = sinh(x) / cosh(x)); the supported functions are {FUNCS}"
+                            ),
+                        ))
+                    }
                     _ => {
                         return Err(Error::new(
                             f.span(),

@@ -356,7 +356,19 @@ pub fn parse_expr(input: ParseStream, min_prec: u8) -> syn::Result<Expr> {
             break;
         }
         let span = input.span();
-        let _: proc_macro2::TokenTree = input.parse()?;
+        let tt: proc_macro2::TokenTree = input.parse()?;
+        if let proc_macro2::TokenTree::Punct(star) = &tt {
+            // `x ** 2` lexes as `*` joined to `*`.
+            if op == BinOp::Mul
+                && star.spacing() == proc_macro2::Spacing::Joint
+                && input.peek(Token![*])
+            {
+                return Err(syn::Error::new(
+                    span,
+                    "`**` is not an operator of the grammar: write `^` for a power, as in `x^2`",
+                ));
+            }
+        }
         let rhs = if op == BinOp::Pow {
             parse_expr(input, PREC_POWER)?
         } else {
@@ -487,11 +499,6 @@ fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
             kind: ExprKind::Ident(id),
             span,
         });
-    }
-    if input.peek(Token![*]) {
-        // `x ** 2` reaches here at the second `*`.
-        return Err(input
-            .error("`**` is not an operator of the grammar: write `^` for a power, as in `x^2`"));
     }
     Err(input.error("expected an expression: a number, a name, `q[i]`, `f(x)`, `(..)`, `sum i in a..b { .. }` or `if .. { .. } else { .. }`"))
 }
