@@ -135,8 +135,10 @@ use quote::quote;
 ///
 /// # Refusals (compile errors at the user's tokens)
 ///
-/// Unknown symbols and functions, non-differentiable functions, indices out
-/// of range, non-constant exponents, duplicate names, constraints that do not
+/// Unknown symbols and functions (with the nearest declared name),
+/// non-differentiable functions, indices out of range, non-constant
+/// exponents, `**` for a power, capitalised parameter names, declarations
+/// past the limits above, duplicate names, constraints that do not
 /// depend on the state, duplicate or dependent constraints, pairs {g_i,g_j}
 /// that do not vanish on M (coisotropy), and an identically singular N
 /// (nondegeneracy, the paper's Section 5.2).

@@ -433,6 +433,8 @@ fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
         }
         input.parse::<Token![else]>()?;
         let otherwise = if input.peek(Token![if]) {
+            // `else if` chains recurse here, not through `parse_expr`.
+            let _nested = Nested::enter(input)?;
             parse_primary(input)?
         } else {
             let c;

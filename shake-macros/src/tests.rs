@@ -420,6 +420,14 @@ fn hostile_depths_are_refused_with_a_message() {
         (hostile::power_chain(10_000), "nested too deeply"),
         (hostile::nested_lets(20_000), "`a1001` is nested too deeply"),
         (
+            hostile::parens(0).replacen(
+                "q[0]",
+                &format!("{} q[0] {}", "if 1 > 2 { q[1] } else ".repeat(10_000), ""),
+                1,
+            ),
+            "nested too deeply",
+        ),
+        (
             hostile::parens(0).replacen("q[0]", "q[0]^2000000000 * q[0]^2000000000", 1),
             "exponent too large",
         ),
