@@ -10,8 +10,10 @@
 //! round-off, with a small c (2 from d|Δ|² = 2Δ·dΔ, times the few roundings
 //! of a step). Expanded into |x_k|² − 2x_k·x_{k−1} + |x_{k−1}|² − l², the
 //! evaluation itself errs by ε|x|², which for |x| = 10³ and |Δ| = 1 is 10³
-//! times that bound: that was the behaviour before (|g| ≈ 5e-10 against
-//! 2e-16 untranslated).
+//! times that bound: that was the behaviour before. Measured on this test
+//! (2000 RATTLE steps, h = 0.01): expanded emission max |g| = 2.8e-14
+//! untranslated and 1.2e-9 translated (3700 round-off units); factored
+//! emission 3.2e-15 and 5.4e-13 (2.7 and 1.7 units).
 
 use shake::{constrained_system, ConstrainedSystem, Integrator, State, StormerVerlet};
 
