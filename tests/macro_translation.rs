@@ -60,7 +60,7 @@ fn worst_residual(shift: f64) -> (f64, f64) {
         sys.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
         for k in 1..N {
             let r = |j: usize| z.q[2 * j].hypot(z.q[2 * j + 1]);
-            let scale = f64::EPSILON * r(k).max(r(k - 1)).max(1.0) * 1.0;
+            let scale = f64::EPSILON * r(k).max(r(k - 1)).max(1.0);
             worst = worst.max(g[k - 1].abs() / scale);
             worst_abs = worst_abs.max(g[k - 1].abs());
         }

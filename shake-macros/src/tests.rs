@@ -325,8 +325,11 @@ pub(crate) fn expand_like_rustc(src: &str) -> (f64, bool, String) {
         .expect("the expansion panicked")
 }
 
-/// Expansion time of the hostile declarations of issue 13. Run with
-/// `cargo test -p shake-macros --release -- --ignored --nocapture hostile_timings`.
+/// Expansion time of the hostile declarations of issue 13 (BENCHMARKS.md).
+/// Run with `cargo test -p shake-macros --release -- --ignored --nocapture
+/// hostile_timings`; `HOSTILE=<part of a name>` runs only the matching cases
+/// (one at a time is kinder to a machine when checking an old version that
+/// exhausts memory).
 #[test]
 #[ignore = "a measurement, not a check"]
 fn hostile_timings() {
@@ -387,6 +390,8 @@ pub(crate) fn phases(src: &str) -> String {
     )
 }
 
+/// Time per phase for one hostile family at size `N`:
+/// `HOSTILE=arm N=24 cargo test -p shake-macros --release -- --ignored --nocapture hostile_phases`.
 #[test]
 #[ignore = "a measurement, not a check"]
 fn hostile_phases() {
