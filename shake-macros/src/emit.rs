@@ -24,6 +24,19 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
     let vis = &def.vis;
     let name = &def.name;
     let params = &def.params;
+    // `new`'s arguments are patterns: a capitalised name (refused, but
+    // still emitted by the fallback) would match a constant in scope.
+    let args: Vec<proc_macro2::Ident> = params
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            if p.to_string().chars().any(char::is_uppercase) {
+                quote::format_ident!("arg_{}", i, span = p.span())
+            } else {
+                p.clone()
+            }
+        })
+        .collect();
     let field_docs = params
         .iter()
         .map(|p| format!(" The parameter `{p}` (a constant for differentiation)."));
@@ -31,6 +44,7 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
         #(#attrs)*
         #[doc = #extra_doc]
         #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
         #vis struct #name {
             #( #[doc = #field_docs] pub #params: f64, )*
         }
@@ -39,8 +53,8 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
             /// Creates the system from its parameters, in declaration order.
             #[allow(clippy::too_many_arguments)]
             #[must_use]
-            pub const fn new(#(#params: f64),*) -> Self {
-                Self { #(#params),* }
+            pub const fn new(#(#args: f64),*) -> Self {
+                Self { #(#params: #args),* }
             }
         }
     }

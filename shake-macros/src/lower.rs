@@ -7,6 +7,7 @@
 //! never sees the out-of-range index of the other branch.
 
 use crate::parse::{BinOp, CmpOp, Cond, ConstraintDecl, Dof, Expr, ExprKind, SystemDef};
+use crate::simplify::MAX_EXPONENT;
 use crate::symbolic::{Func, Graph, Names, NodeId, ParamId, VarId};
 use proc_macro2::Span;
 use std::collections::HashMap;
@@ -87,6 +88,18 @@ impl Lowerer {
         Ok(())
     }
 
+    /// ` (did you mean `x`?)` for the nearest declared name of the wanted
+    /// kind, or bound index, within a few edits.
+    fn did_you_mean(&self, name: &str, kind: impl Fn(&Sym) -> bool) -> String {
+        let declared = self
+            .syms
+            .iter()
+            .filter(|(_, (s, _))| kind(s))
+            .map(|(n, _)| n.as_str());
+        let bound = self.indices.iter().map(|(n, _)| n.as_str());
+        suggestion(name, declared.chain(bound))
+    }
+
     fn lookup_index(&self, name: &str) -> Option<i64> {
         self.indices
             .iter()
@@ -132,7 +145,10 @@ impl Lowerer {
                         None => {
                             return Err(Error::new(
                                 id.span(),
-                                format!("unknown index `{name}`: not a `const` or a bound index"),
+                                format!(
+                                    "unknown index `{name}`: not a `const` or a bound index{}",
+                                    self.did_you_mean(&name, |s| matches!(s, Sym::Number(_)))
+                                ),
                             ))
                         }
                     }
@@ -200,6 +216,27 @@ impl Lowerer {
         Ok(a..b)
     }
 
+    /// Refuses a power x^n with |n| > [`MAX_EXPONENT`], written or made by
+    /// merging (`x^a · x^b`), at the operator that made it.
+    fn exponent_ok(&self, node: NodeId, e: &Expr) -> Result<NodeId, Error> {
+        let n = self.graph.max_exponent(node);
+        if n > MAX_EXPONENT {
+            let shown = if n == u32::MAX {
+                "beyond 4·10^9".to_string()
+            } else {
+                n.to_string()
+            };
+            return Err(Error::new(
+                e.span,
+                format!(
+                    "exponent too large: this makes a power with |exponent| {shown}, above the limit of \
+                     {MAX_EXPONENT} (x^n over- or underflows f64 for every |x| outside [0.5, 2] there)"
+                ),
+            ));
+        }
+        Ok(node)
+    }
+
     /// Lowers a real-valued expression into the graph.
     fn real(&mut self, e: &Expr) -> Result<NodeId, Error> {
         Ok(match &e.kind {
@@ -227,7 +264,8 @@ impl Lowerer {
                             id.span(),
                             format!(
                                 "unknown symbol `{name}`: not a parameter, coordinate, momentum, \
-                                 `let`, `const` or bound index"
+                                 `let`, `const` or bound index{}",
+                                self.did_you_mean(&name, |s| !matches!(s, Sym::Array(_)))
                             ),
                         ))
                     }
@@ -243,7 +281,10 @@ impl Lowerer {
                     None => {
                         return Err(Error::new(
                             id.span(),
-                            format!("unknown array `{name}`: the state arrays are the ones declared by `dof`"),
+                            format!(
+                                "unknown array `{name}`: the state arrays are the ones declared by `dof`{}",
+                                self.did_you_mean(&name, |s| matches!(s, Sym::Array(_)))
+                            ),
                         ))
                     }
                 };
@@ -267,7 +308,7 @@ impl Lowerer {
             ExprKind::Binary(op, a, b) => {
                 let x = self.real(a)?;
                 let y = self.real(b)?;
-                match op {
+                let r = match op {
                     BinOp::Add => self.graph.add2(x, y),
                     BinOp::Sub => self.graph.sub(x, y),
                     BinOp::Mul => self.graph.mul2(x, y),
@@ -299,7 +340,8 @@ impl Lowerer {
                                  write `exp(y * ln(x))` for a variable exponent",
                         )),
                     },
-                }
+                };
+                self.exponent_ok(r, e)?
             }
             ExprKind::Call(f, args) => {
                 let name = f.to_string();
@@ -322,10 +364,23 @@ impl Lowerer {
                     "log" => {
                         return Err(Error::new(f.span(), "`log` is ambiguous: write `ln` for the natural logarithm"))
                     }
+                    "sinh" | "cosh" | "tanh" => {
+                        return Err(Error::new(
+                            f.span(),
+                            format!(
+                                "unknown function `{name}`: write the hyperbolic functions with `exp` \
+                                 (sinh(x) = (exp(x) - exp(-x)) / 2, cosh(x) = (exp(x) + exp(-x)) / 2, \
+                                 tanh(x) = sinh(x) / cosh(x)); the supported functions are {FUNCS}"
+                            ),
+                        ))
+                    }
                     _ => {
                         return Err(Error::new(
                             f.span(),
-                            format!("unknown function `{name}`: the supported functions are {FUNCS}"),
+                            format!(
+                                "unknown function `{name}`: the supported functions are {FUNCS}{}",
+                                suggestion(&name, FUNCS.split(", "))
+                            ),
                         ))
                     }
                 };
@@ -406,11 +461,87 @@ impl Lowerer {
     }
 }
 
+/// The edit distance between two names, in characters: insertions,
+/// deletions, substitutions and transpositions of neighbours (`cso` is one
+/// edit from `cos`), the optimal-string-alignment variant of Damerau's.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let (a, b): (Vec<char>, Vec<char>) = (a.chars().collect(), b.chars().collect());
+    let w = b.len() + 1;
+    let mut d = vec![0usize; (a.len() + 1) * w];
+    for i in 0..=a.len() {
+        for j in 0..=b.len() {
+            d[i * w + j] = if i == 0 || j == 0 {
+                i + j
+            } else {
+                let cost = usize::from(a[i - 1] != b[j - 1]);
+                let mut v = (d[(i - 1) * w + j] + 1)
+                    .min(d[i * w + j - 1] + 1)
+                    .min(d[(i - 1) * w + j - 1] + cost);
+                if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                    v = v.min(d[(i - 2) * w + j - 2] + 1);
+                }
+                v
+            };
+        }
+    }
+    d[a.len() * w + b.len()]
+}
+
+/// ` (did you mean `x`?)` for the candidate nearest to `name`, if it is
+/// within a third of the name's length in edits (at least one; case
+/// differences count as edits), else "". Ties go to the first in sorted order, so
+/// the message does not depend on hash order.
+fn suggestion<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
+    let limit = (name.chars().count() / 3).max(1);
+    let mut best: Option<(usize, &str)> = None;
+    for c in candidates {
+        let d = edit_distance(&name.to_lowercase(), &c.to_lowercase())
+            + usize::from(name.to_lowercase() == c.to_lowercase() && name != c);
+        let better = match best {
+            None => true,
+            Some(b) => (d, c) < b,
+        };
+        if d <= limit && d > 0 && better {
+            best = Some((d, c));
+        }
+    }
+    best.map(|(_, c)| format!(" (did you mean `{c}`?)"))
+        .unwrap_or_default()
+}
+
+/// The deepest expression graph a `let` may make (the longest chain of
+/// operations from it down to q, p or a parameter). Only `let`s that build
+/// on each other reach it: an expression alone is at most
+/// [`crate::parse::MAX_NESTING`] deep. Every pass is linear in the graph,
+/// but the generated code grows with the depth times the number of
+/// derivatives; 2000 nested `let`s already take seconds to expand.
+pub const MAX_LET_DEPTH: u32 = 1000;
+
+fn shallow(graph: &Graph, v: NodeId, name: &Ident) -> Result<NodeId, Error> {
+    if graph.height(v) > MAX_LET_DEPTH {
+        return Err(Error::new(
+            name.span(),
+            format!(
+                "`{name}` is nested too deeply: its expression is a chain of {} operations through \
+                 the `let`s before it, more than the limit of {MAX_LET_DEPTH}",
+                graph.height(v)
+            ),
+        ));
+    }
+    Ok(v)
+}
+
 /// Builds the symbolic system; returns every error found (one per
 /// offending item), not just the first.
 pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
+    lower_with(def, false)
+}
+
+/// [`lower`] into a graph that keeps products and powers of sums factored
+/// (`factored = true`: the values of the emitted code).
+pub fn lower_with(def: &SystemDef, factored: bool) -> Result<System, Vec<Error>> {
     let mut lw = Lowerer {
-        graph: Graph::default(),
+        graph: Graph::new(factored),
         dof: 0,
         syms: HashMap::new(),
         indices: Vec::new(),
@@ -418,6 +549,18 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
     let mut errors = Vec::new();
     let mut names = Names::default();
     for (i, p) in def.params.iter().enumerate() {
+        let name = p.to_string();
+        if name.chars().any(char::is_uppercase) {
+            errors.push(Error::new(
+                p.span(),
+                format!(
+                    "parameter `{name}` is not snake_case: parameters become fields of the struct and \
+                     arguments of `new`, where a capitalised name draws `non_snake_case` warnings and is \
+                     read as a pattern if a constant of that name is in scope (E0005); write `{}`",
+                    name.to_lowercase()
+                ),
+            ));
+        }
         if let Err(e) = lw.declare(p, Sym::Param(ParamId(i as u32))) {
             errors.push(e);
         }
@@ -475,7 +618,19 @@ pub fn lower(def: &SystemDef) -> Result<System, Vec<Error>> {
         return Err(errors);
     }
     for (n, e) in &def.lets {
-        match lw.real(e).and_then(|v| lw.declare(n, Sym::Let(v))) {
+        let v = match lw.real(e) {
+            Ok(v) => v,
+            Err(e) => {
+                errors.push(e);
+                continue;
+            }
+        };
+        // Too deep: the `let`s after it would only add a cascade of errors.
+        if let Err(e) = shallow(&lw.graph, v, n) {
+            errors.push(e);
+            return Err(errors);
+        }
+        match lw.declare(n, Sym::Let(v)) {
             Ok(()) => {}
             Err(e) => errors.push(e),
         }

@@ -319,15 +319,66 @@ fn peek_binop(input: ParseStream) -> Option<(BinOp, u8)> {
     }
 }
 
+/// The deepest nesting of one expression the parser accepts: parentheses,
+/// unary minus signs, `^` chains (right-associative), calls, `sum` and `if`
+/// bodies each add a level. The parser is recursive, and so are the passes
+/// after it; the limit keeps them far from the stack's end (rustc runs the
+/// macro on an 8 MiB stack and dies, not errs, when it overflows).
+pub const MAX_NESTING: usize = 256;
+
+thread_local! {
+    /// The current nesting of [`parse_expr`] calls on this thread.
+    static NESTING: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+/// One level of nesting, given back when dropped (also on `?` returns).
+struct Nested;
+
+impl Nested {
+    fn enter(input: ParseStream) -> syn::Result<Nested> {
+        let depth = NESTING.with(|n| {
+            n.set(n.get() + 1);
+            n.get()
+        });
+        let guard = Nested;
+        if depth > MAX_NESTING {
+            return Err(input.error(format!(
+                "expression nested too deeply: more than {MAX_NESTING} levels of parentheses, \
+                 unary minus signs, `^` or calls (split it with `let`s)"
+            )));
+        }
+        Ok(guard)
+    }
+}
+
+impl Drop for Nested {
+    fn drop(&mut self) {
+        NESTING.with(|n| n.set(n.get() - 1));
+    }
+}
+
 /// Precedence climbing: `+ -` < `* / %` < unary `-` < `^` (right-assoc).
 pub fn parse_expr(input: ParseStream, min_prec: u8) -> syn::Result<Expr> {
+    let _nested = Nested::enter(input)?;
     let mut lhs = parse_unary(input)?;
     while let Some((op, prec)) = peek_binop(input) {
         if prec < min_prec {
             break;
         }
         let span = input.span();
-        let _: proc_macro2::TokenTree = input.parse()?;
+        let tt: proc_macro2::TokenTree = input.parse()?;
+        if let proc_macro2::TokenTree::Punct(star) = &tt {
+            // `x ** 2` lexes as `*` joined to `*`.
+            if op == BinOp::Mul
+                && star.spacing() == proc_macro2::Spacing::Joint
+                && input.peek(Token![*])
+            {
+                return Err(syn::Error::new(
+                    span,
+                    "`**` is not an operator of the grammar: write `^` for a power, as in `x^2`",
+                ));
+            }
+        }
         let rhs = if op == BinOp::Pow {
             parse_expr(input, PREC_POWER)?
         } else {
@@ -392,6 +443,8 @@ fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
         }
         input.parse::<Token![else]>()?;
         let otherwise = if input.peek(Token![if]) {
+            // `else if` chains recurse here, not through `parse_expr`.
+            let _nested = Nested::enter(input)?;
             parse_primary(input)?
         } else {
             let c;

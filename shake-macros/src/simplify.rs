@@ -22,6 +22,10 @@
 //!   makes "identically zero" (of a bracket, of N) decidable for the
 //!   polynomial systems of the paper.
 //!
+//! In a graph marked `factored` (the one the emitted code is generated
+//! from), the two expansions are off: identities are decided on the
+//! expanded graph, values are computed in the form the user wrote.
+//!
 //! Sums and products are sorted by node id. Ids are assigned in creation
 //! order, which is deterministic for a given input, so the canonical form is
 //! a function of the input alone.
@@ -31,6 +35,22 @@ use std::collections::BTreeMap;
 
 /// The largest number of terms an expansion into monomials may produce.
 pub const EXPAND_LIMIT: usize = 64;
+
+/// A sum (product) with more terms (factors) than this enters a larger sum
+/// (product) as one term instead of being flattened into it. Flattening
+/// copies the child, so a chain of `let`s `x_k = x_{k−1} + t_k` (or the
+/// derivative of a chain of compositions, a product of k factors at link k)
+/// would cost O(n²) work and memory; past the limit the copies stop and the
+/// cost is linear. Sums and products that size are beyond what collecting
+/// like terms is for.
+pub const FLATTEN_LIMIT: usize = 64;
+
+/// The largest |n| accepted in `x^n` (integer or real), after merging
+/// (`x^a · x^b = x^(a+b)`, `(x^a)^b = x^(ab)`). Beyond it x^n over- or
+/// underflows `f64` for every |x| outside [0.5, 2] (2^±1024 is the edge of
+/// the exponent range), so such a power is almost surely a mistake; the
+/// limit also keeps exponent arithmetic far from `i32` overflow.
+pub const MAX_EXPONENT: u32 = 1024;
 
 impl Graph {
     pub fn num(&mut self, x: f64) -> NodeId {
@@ -117,7 +137,7 @@ impl Graph {
         let mut flat = Vec::with_capacity(terms.len());
         for t in terms {
             match self.node(t) {
-                Node::Add(c) => flat.extend_from_slice(c),
+                Node::Add(c) if c.len() <= FLATTEN_LIMIT => flat.extend_from_slice(c),
                 _ => flat.push(t),
             }
         }
@@ -152,7 +172,7 @@ impl Graph {
         let mut flat = Vec::with_capacity(factors.len());
         for f in factors {
             match self.node(f) {
-                Node::Mul(c) => flat.extend_from_slice(c),
+                Node::Mul(c) if c.len() <= FLATTEN_LIMIT => flat.extend_from_slice(c),
                 _ => flat.push(f),
             }
         }
@@ -161,8 +181,16 @@ impl Graph {
         for f in flat {
             match self.node(f).clone() {
                 Node::Const(b) => coef *= f64::from_bits(b),
-                Node::Pow(base, n) => *powers.entry(base).or_insert(0) += n,
-                _ => *powers.entry(f).or_insert(0) += 1,
+                // Saturating: a merged exponent past MAX_EXPONENT is refused
+                // by the lowering (see `Graph::max_exponent`), never wrapped.
+                Node::Pow(base, n) => {
+                    let e = powers.entry(base).or_insert(0);
+                    *e = e.saturating_add(n);
+                }
+                _ => {
+                    let e = powers.entry(f).or_insert(0);
+                    *e = e.saturating_add(1);
+                }
             }
         }
         if coef == 0.0 {
@@ -206,6 +234,19 @@ impl Graph {
     /// Distributes a product over sums: always for `c · (sum)`, and for
     /// products of polynomial sums within [`EXPAND_LIMIT`] terms.
     fn try_expand(&mut self, coef: f64, factors: &[NodeId]) -> Option<NodeId> {
+        if self.factored {
+            // The emitted values keep products and powers of sums as the
+            // user wrote them: expanding (a − b)² into a² − 2ab + b² cancels
+            // catastrophically when |a|, |b| ≫ |a − b|. Only c·(sum) with
+            // c = ±2^k is distributed (exact: scaling by 2^k commutes with
+            // rounding), so like terms still meet and cancel exactly.
+            let scale = coef.abs();
+            let exact = scale.is_normal() && scale.to_bits() & ((1u64 << 52) - 1) == 0;
+            let sum = factors.len() == 1 && matches!(self.node(factors[0]), Node::Add(_));
+            if !(exact && sum && coef != 1.0) {
+                return None;
+            }
+        }
         // Each factor as the list of terms it contributes.
         let mut lists: Vec<Vec<NodeId>> = Vec::with_capacity(factors.len());
         let mut any_sum = false;
@@ -276,7 +317,7 @@ impl Graph {
                 None => self.intern(Node::Pow(x, n)),
             },
             Node::PowF(b, r) => self.powf(b, f64::from_bits(r) * f64::from(n)),
-            Node::Mul(fs) => {
+            Node::Mul(fs) if fs.len() <= FLATTEN_LIMIT => {
                 let fs: Vec<NodeId> = fs.iter().map(|f| self.pow_raw(*f, n)).collect();
                 self.mul(fs)
             }

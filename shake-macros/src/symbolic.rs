@@ -124,9 +124,17 @@ pub struct Graph {
     nodes: Vec<Node>,
     support: Vec<Box<[VarId]>>,
     degree: Vec<Option<u32>>,
+    /// The largest |exponent| of a power in the node's subgraph (saturating).
+    max_exp: Vec<u32>,
+    /// The length of the longest path from the node down to a leaf.
+    height: Vec<u32>,
     memo: HashMap<Node, NodeId>,
     pub(crate) diff_memo: HashMap<(NodeId, VarId), NodeId>,
     pub names: Names,
+    /// The graph of the emitted values: products and powers of sums stay as
+    /// written (see `simplify`), for accuracy; `false` in the graph the
+    /// checks decide identities on.
+    pub factored: bool,
 }
 
 pub(crate) fn bits(x: f64) -> u64 {
@@ -156,6 +164,30 @@ impl Graph {
         self.degree[id.index()]
     }
 
+    /// An empty graph; `factored` as in [`Graph::factored`].
+    pub fn new(factored: bool) -> Graph {
+        Graph {
+            factored,
+            ..Graph::default()
+        }
+    }
+
+    /// The number of nodes.
+    #[cfg(test)]
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// The longest path from `id` down to a leaf of the graph.
+    pub fn height(&self, id: NodeId) -> u32 {
+        self.height[id.index()]
+    }
+
+    /// The largest |n| of a power x^n anywhere in `id` (saturating).
+    pub fn max_exponent(&self, id: NodeId) -> u32 {
+        self.max_exp[id.index()]
+    }
+
     pub fn as_const(&self, id: NodeId) -> Option<f64> {
         match self.nodes[id.index()] {
             Node::Const(b) => Some(f64::from_bits(b)),
@@ -179,6 +211,25 @@ impl Graph {
         self.nodes.push(node.clone());
         self.support.push(support);
         self.degree.push(degree);
+        let own = match &node {
+            Node::Pow(_, n) => n.unsigned_abs(),
+            // `as` saturates (NaN becomes 0: a NaN exponent is folded away).
+            Node::PowF(_, r) => f64::from_bits(*r).abs().ceil() as u32,
+            _ => 0,
+        };
+        let max_exp = node
+            .children()
+            .iter()
+            .map(|c| self.max_exp[c.index()])
+            .fold(own, u32::max);
+        self.max_exp.push(max_exp);
+        let height = node
+            .children()
+            .iter()
+            .map(|c| self.height[c.index()] + 1)
+            .max()
+            .unwrap_or(0);
+        self.height.push(height);
         self.memo.insert(node, id);
         id
     }
@@ -233,137 +284,181 @@ impl Graph {
         v
     }
 
-    /// A readable rendering, for diagnostics and generated docs.
+    /// A readable rendering, for diagnostics and generated docs, cut with
+    /// `…` after about [`DISPLAY_BUDGET`] characters or [`DISPLAY_DEPTH`]
+    /// levels. The graph is a DAG and the rendering a tree (a `let` used
+    /// twice is printed twice), so an uncut rendering can be exponentially
+    /// longer than the graph (40 `let`s each using the one before twice
+    /// print 2^40 subtrees): the budget keeps the work linear in what is
+    /// shown, and the recursion shallow.
     pub fn display(&self, id: NodeId) -> String {
         let mut s = String::new();
-        self.write(id, 0, &mut s);
+        self.write(id, 0, &mut s, 0);
         s
     }
 
-    // Precedences: 1 sum, 2 product, 3 power/unary, 4 atom.
-    fn write(&self, id: NodeId, outer: u8, s: &mut String) {
-        let (text, prec) = match self.node(id) {
-            Node::Const(b) => {
-                let x = f64::from_bits(*b);
-                (fmt_num(x), if x < 0.0 { 1 } else { 4 })
-            }
-            Node::Var(k) => (self.names.vars[k.index()].clone(), 4),
-            Node::Param(k) => (self.names.params[k.0 as usize].clone(), 4),
-            Node::Lambda(k) => (format!("λ[{k}]"), 4),
-            Node::Add(c) => {
-                let mut t = String::new();
-                for (i, term) in c.iter().enumerate() {
-                    let (neg, body) = self.split_sign(*term);
-                    match (i, neg) {
-                        (0, true) => t.push('-'),
-                        (_, true) => t.push_str(" - "),
-                        (0, false) => {}
-                        (_, false) => t.push_str(" + "),
-                    }
-                    t.push_str(&body);
-                }
-                (t, 1)
-            }
-            Node::Mul(_) => {
-                let (neg, body) = self.split_sign(id);
-                if neg {
-                    (format!("-{body}"), 1)
-                } else {
-                    (body, 2)
-                }
-            }
-            Node::Pow(x, n) if *n < 0 => {
-                let mut t = String::from("1/");
-                self.write(*x, 4, &mut t);
-                if *n != -1 {
-                    let _ = write!(t, "^{}", -n);
-                }
-                (t, 2)
-            }
-            Node::Pow(x, n) => {
-                let mut t = String::new();
-                self.write(*x, 4, &mut t);
-                let _ = write!(t, "^{n}");
-                (t, 3)
-            }
-            Node::PowF(x, r) if f64::from_bits(*r) == 0.5 => {
-                let mut t = String::from("sqrt(");
-                self.write(*x, 0, &mut t);
-                t.push(')');
-                (t, 4)
-            }
-            Node::PowF(x, r) => {
-                let mut t = String::new();
-                self.write(*x, 4, &mut t);
-                let _ = write!(t, "^{}", fmt_num(f64::from_bits(*r)));
-                (t, 3)
-            }
-            Node::Call(f, x) => {
-                let mut t = format!("{}(", f.name());
-                self.write(*x, 0, &mut t);
-                t.push(')');
-                (t, 4)
-            }
-        };
-        if prec < outer {
-            s.push('(');
-            s.push_str(&text);
-            s.push(')');
-        } else {
-            s.push_str(&text);
+    /// True when the budget is spent (and `…` has been written once).
+    fn spent(s: &mut String, depth: usize) -> bool {
+        if s.len() < DISPLAY_BUDGET && depth <= DISPLAY_DEPTH {
+            return false;
+        }
+        if !s.ends_with('…') {
+            s.push('…');
+        }
+        true
+    }
+
+    /// The precedence of the rendering of `id`: 1 sum, 2 product,
+    /// 3 power/unary, 4 atom.
+    fn prec(&self, id: NodeId) -> u8 {
+        match self.node(id) {
+            Node::Const(b) if f64::from_bits(*b) < 0.0 => 1,
+            Node::Const(_) | Node::Var(_) | Node::Param(_) | Node::Lambda(_) | Node::Call(..) => 4,
+            Node::Add(_) => 1,
+            Node::Mul(_) if self.negative(id) => 1,
+            Node::Mul(_) => 2,
+            Node::Pow(_, n) if *n < 0 => 2,
+            Node::PowF(_, r) if f64::from_bits(*r) == 0.5 => 4,
+            Node::Pow(..) | Node::PowF(..) => 3,
         }
     }
 
-    /// A product or constant as (is negative, rendering of its magnitude).
-    fn split_sign(&self, id: NodeId) -> (bool, String) {
+    /// A negative constant, or a product with a negative coefficient.
+    fn negative(&self, id: NodeId) -> bool {
         match self.node(id) {
-            Node::Const(b) if f64::from_bits(*b) < 0.0 => (true, fmt_num(-f64::from_bits(*b))),
+            Node::Const(b) => f64::from_bits(*b) < 0.0,
+            Node::Mul(c) => self.as_const(c[0]).is_some_and(|k| k < 0.0),
+            _ => false,
+        }
+    }
+
+    fn write(&self, id: NodeId, outer: u8, s: &mut String, depth: usize) {
+        if Self::spent(s, depth) {
+            return;
+        }
+        let paren = self.prec(id) < outer;
+        if paren {
+            s.push('(');
+        }
+        match self.node(id) {
+            Node::Const(b) => s.push_str(&fmt_num(f64::from_bits(*b))),
+            Node::Var(k) => s.push_str(&self.names.vars[k.index()]),
+            Node::Param(k) => s.push_str(&self.names.params[k.0 as usize]),
+            Node::Lambda(k) => {
+                let _ = write!(s, "λ[{k}]");
+            }
+            Node::Add(c) => {
+                for (i, term) in c.iter().enumerate() {
+                    if Self::spent(s, depth) {
+                        break;
+                    }
+                    match (i, self.negative(*term)) {
+                        (0, true) => s.push('-'),
+                        (_, true) => s.push_str(" - "),
+                        (0, false) => {}
+                        (_, false) => s.push_str(" + "),
+                    }
+                    self.write_magnitude(*term, s, depth + 1);
+                }
+            }
+            Node::Mul(_) => {
+                if self.negative(id) {
+                    s.push('-');
+                }
+                self.write_magnitude(id, s, depth + 1);
+            }
+            Node::Pow(x, n) if *n < 0 => {
+                s.push_str("1/");
+                self.write(*x, 4, s, depth + 1);
+                if *n != -1 {
+                    let _ = write!(s, "^{}", -i64::from(*n));
+                }
+            }
+            Node::Pow(x, n) => {
+                self.write(*x, 4, s, depth + 1);
+                let _ = write!(s, "^{n}");
+            }
+            Node::PowF(x, r) if f64::from_bits(*r) == 0.5 => {
+                s.push_str("sqrt(");
+                self.write(*x, 0, s, depth + 1);
+                s.push(')');
+            }
+            Node::PowF(x, r) => {
+                self.write(*x, 4, s, depth + 1);
+                let _ = write!(s, "^{}", fmt_num(f64::from_bits(*r)));
+            }
+            Node::Call(f, x) => {
+                s.push_str(f.name());
+                s.push('(');
+                self.write(*x, 0, s, depth + 1);
+                s.push(')');
+            }
+        }
+        if paren {
+            s.push(')');
+        }
+    }
+
+    /// The magnitude of a product or constant (its sign is written by the
+    /// caller); anything else as a factor.
+    fn write_magnitude(&self, id: NodeId, s: &mut String, depth: usize) {
+        if Self::spent(s, depth) {
+            return;
+        }
+        match self.node(id) {
+            Node::Const(b) => s.push_str(&fmt_num(f64::from_bits(*b).abs())),
             Node::Mul(c) => {
-                let mut coef = 1.0;
-                let mut num = Vec::new();
-                let mut den = Vec::new();
-                for f in c.iter() {
-                    match self.node(*f) {
-                        Node::Const(b) => coef = f64::from_bits(*b),
-                        Node::Pow(x, n) if *n < 0 => {
-                            let mut t = String::new();
-                            self.write(*x, 4, &mut t);
-                            if *n != -1 {
-                                let _ = write!(t, "^{}", -n);
-                            }
-                            den.push(t);
-                        }
-                        _ => {
-                            let mut t = String::new();
-                            self.write(*f, 2, &mut t);
-                            num.push(t);
-                        }
-                    }
-                }
+                let coef = self.as_const(c[0]).unwrap_or(1.0);
+                let is_den = |f: &NodeId| matches!(self.node(*f), Node::Pow(_, n) if *n < 0);
+                let num: Vec<NodeId> = c
+                    .iter()
+                    .filter(|f| self.as_const(**f).is_none() && !is_den(f))
+                    .copied()
+                    .collect();
+                let den: Vec<NodeId> = c.iter().filter(|f| is_den(f)).copied().collect();
+                let mut first = true;
                 if coef.abs() != 1.0 || num.is_empty() {
-                    num.insert(0, fmt_num(coef.abs()));
+                    s.push_str(&fmt_num(coef.abs()));
+                    first = false;
                 }
-                let mut t = num.join("*");
-                match den.len() {
-                    0 => {}
-                    1 => {
-                        t.push('/');
-                        t.push_str(&den[0]);
+                for f in num {
+                    if !first {
+                        s.push('*');
                     }
-                    _ => {
-                        let _ = write!(t, "/({})", den.join("*"));
+                    first = false;
+                    self.write(f, 2, s, depth + 1);
+                }
+                if !den.is_empty() {
+                    s.push('/');
+                    if den.len() > 1 {
+                        s.push('(');
+                    }
+                    for (i, f) in den.iter().enumerate() {
+                        if i > 0 {
+                            s.push('*');
+                        }
+                        let Node::Pow(x, n) = self.node(*f) else {
+                            unreachable!()
+                        };
+                        self.write(*x, 4, s, depth + 1);
+                        if *n != -1 {
+                            let _ = write!(s, "^{}", -i64::from(*n));
+                        }
+                    }
+                    if den.len() > 1 {
+                        s.push(')');
                     }
                 }
-                (coef < 0.0, t)
             }
-            _ => {
-                let mut t = String::new();
-                self.write(id, 2, &mut t);
-                (false, t)
-            }
+            _ => self.write(id, 2, s, depth),
         }
     }
 }
+
+/// The rendering of [`Graph::display`] stops after this many bytes.
+pub const DISPLAY_BUDGET: usize = 400;
+/// ... or this deep in the expression.
+pub const DISPLAY_DEPTH: usize = 64;
 
 fn fmt_num(x: f64) -> String {
     if x.fract() == 0.0 && x.abs() < 1e15 {

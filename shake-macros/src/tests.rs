@@ -214,3 +214,321 @@ fn bad_input_never_panics() {
         assert!(out.is_ok(), "the macro panicked on: {src}");
     }
 }
+
+/// Sources of the hostile declarations of issue 13 ("Macro crashes").
+pub(crate) mod hostile {
+    fn wrap(lets: &str, h: &str) -> String {
+        format!(
+            "struct S {{ dof q[2], p[2]; {lets} hamiltonian = p[0]^2 + p[1]^2 + {h}; \
+             constraints {{ c: q[0]^2 + q[1]^2 - 1 }} }}"
+        )
+    }
+    pub fn parens(n: usize) -> String {
+        wrap("", &format!("{}q[0]{}", "(".repeat(n), ")".repeat(n)))
+    }
+    pub fn minus(n: usize) -> String {
+        wrap("", &format!("{}q[0]", "- ".repeat(n)))
+    }
+    pub fn power_chain(n: usize) -> String {
+        wrap("", &format!("q[0]{}", "^1".repeat(n)))
+    }
+    /// `let a_k = sin(a_{k−1})`: a graph n nodes deep.
+    pub fn nested_lets(n: usize) -> String {
+        let mut lets = String::from("let a0 = q[0];");
+        for k in 1..=n {
+            lets.push_str(&format!("let a{k} = sin(a{});", k - 1));
+        }
+        wrap(&lets, &format!("a{n}"))
+    }
+    /// `let a_k = sin(a_{k−1}) * cos(a_{k−1})`: a DAG of n nodes, a tree of 2^n.
+    pub fn dag(n: usize) -> String {
+        let mut lets = String::from("let a0 = q[0] + q[1];");
+        for k in 1..=n {
+            lets.push_str(&format!("let a{k} = sin(a{0}) + cos(a{0});", k - 1));
+        }
+        wrap(&lets, &format!("a{n}"))
+    }
+    /// A polynomial DAG: `let a_k = a_{k−1} * a_{k−1} + q[1]`.
+    pub fn poly_dag(n: usize) -> String {
+        let mut lets = String::from("let a0 = q[0] + q[1];");
+        for k in 1..=n {
+            lets.push_str(&format!("let a{k} = a{0} * a{0} + q[1];", k - 1));
+        }
+        wrap(&lets, &format!("a{n}"))
+    }
+    /// A planar arm of n links with joint angles q[k] (q[0] from the
+    /// x axis), the absolute direction (C_k, S_k) of link k by the rotation
+    /// recurrence, the joints by x_k = x_{k−1} + l C_k, and the tip held
+    /// on the line x = ax.
+    pub fn arm(n: usize) -> String {
+        let mut lets = String::from(
+            "let c0 = cos(q[0]); let s0 = sin(q[0]); let C0 = c0; let S0 = s0; \
+             let x0 = l * C0; let y0 = l * S0;",
+        );
+        for k in 1..n {
+            let j = k - 1;
+            lets.push_str(&format!(
+                "let c{k} = cos(q[{k}]); let s{k} = sin(q[{k}]); \
+                 let C{k} = C{j} * c{k} - S{j} * s{k}; let S{k} = S{j} * c{k} + C{j} * s{k}; \
+                 let x{k} = x{j} + l * C{k}; let y{k} = y{j} + l * S{k};"
+            ));
+        }
+        let ys: Vec<String> = (0..n).map(|k| format!("y{k}")).collect();
+        format!(
+            "struct Arm {{ parameters {{ l, gravity, ax }} dof q[{n}], p[{n}]; {lets} \
+             hamiltonian = sum i in 0..{n} {{ p[i]^2 / 2 }} + gravity * ({}); \
+             constraints {{ tip: x{} - ax }} }}",
+            ys.join(" + "),
+            n - 1
+        )
+    }
+    /// The same arm with absolute angles φ_k = φ_{k−1} + θ_k.
+    pub fn arm_angles(n: usize) -> String {
+        let mut lets = String::from("let f0 = q[0]; let x0 = l * cos(f0); let y0 = l * sin(f0);");
+        for k in 1..n {
+            let j = k - 1;
+            lets.push_str(&format!(
+                "let f{k} = f{j} + q[{k}]; let x{k} = x{j} + l * cos(f{k}); let y{k} = y{j} + l * sin(f{k});"
+            ));
+        }
+        let ys: Vec<String> = (0..n).map(|k| format!("y{k}")).collect();
+        format!(
+            "struct Arm {{ parameters {{ l, gravity, ax }} dof q[{n}], p[{n}]; {lets} \
+             hamiltonian = sum i in 0..{n} {{ p[i]^2 / 2 }} + gravity * ({}); \
+             constraints {{ tip: x{} - ax }} }}",
+            ys.join(" + "),
+            n - 1
+        )
+    }
+}
+
+/// Expands `src` on a thread with rustc's 8 MiB stack; (seconds, refused,
+/// first 300 characters of the output).
+pub(crate) fn expand_like_rustc(src: &str) -> (f64, bool, String) {
+    let src = src.to_string();
+    std::thread::Builder::new()
+        .stack_size(8 << 20)
+        .spawn(move || {
+            let tokens: proc_macro2::TokenStream = src.parse().expect("tokens");
+            let t = std::time::Instant::now();
+            let out = crate::expand(tokens).to_string();
+            let dt = t.elapsed().as_secs_f64();
+            let refused = out.contains("compile_error");
+            let head = match out.find("compile_error") {
+                Some(i) => out[i..].chars().take(300).collect(),
+                None => out.chars().take(120).collect(),
+            };
+            (dt, refused, head)
+        })
+        .expect("thread")
+        .join()
+        .expect("the expansion panicked")
+}
+
+/// Expansion time of the hostile declarations of issue 13 (BENCHMARKS.md).
+/// Run with `cargo test -p shake-macros --release -- --ignored --nocapture
+/// hostile_timings`; `HOSTILE=<part of a name>` runs only the matching cases
+/// (one at a time is kinder to a machine when checking an old version that
+/// exhausts memory).
+#[test]
+#[ignore = "a measurement, not a check"]
+fn hostile_timings() {
+    let which = std::env::var("HOSTILE").unwrap_or_default();
+    let cases: Vec<(&str, String)> = vec![
+        ("parens 1000", hostile::parens(1000)),
+        ("minus 10^4", hostile::minus(10_000)),
+        ("power chain 10^4", hostile::power_chain(10_000)),
+        ("nested lets 2*10^4", hostile::nested_lets(20_000)),
+        ("dag 20", hostile::dag(20)),
+        ("dag 40", hostile::dag(40)),
+        ("poly dag 40", hostile::poly_dag(40)),
+        ("arm 8", hostile::arm(8)),
+        ("arm 12", hostile::arm(12)),
+        ("arm 24", hostile::arm(24)),
+        ("arm angles 24", hostile::arm_angles(24)),
+    ];
+    for (name, src) in cases {
+        if !which.is_empty() && !name.contains(&which) {
+            continue;
+        }
+        let (dt, refused, head) = expand_like_rustc(&src);
+        println!("{name:22} {dt:9.3} s refused={refused} {head}");
+    }
+}
+
+/// Time per phase of the expansion of `src`, with the graph's size.
+pub(crate) fn phases(src: &str) -> String {
+    let t = std::time::Instant::now();
+    let def: SystemDef = syn::parse_str(src).expect("parse");
+    let t_parse = t.elapsed().as_secs_f64();
+    let mut sys = match lower(&def) {
+        Ok(s) => s,
+        Err(e) => return format!("refused: {}", e[0]),
+    };
+    let t_lower = t.elapsed().as_secs_f64();
+    let n_lower = sys.graph.len();
+    let g: Vec<_> = sys.constraints.iter().map(|c| c.node).collect();
+    let der = crate::diff::Derived::compute(&mut sys.graph, sys.dof, sys.hamiltonian, &g);
+    let t_diff = t.elapsed().as_secs_f64();
+    let n_diff = sys.graph.len();
+    let checked = crate::check::check(&mut sys, &der).is_ok();
+    let t_check = t.elapsed().as_secs_f64();
+    let doc = crate::system_doc(&sys, &der);
+    let t_doc = t.elapsed().as_secs_f64();
+    let out = crate::emit::impls(&def, &sys, &der).to_string();
+    let t_emit = t.elapsed().as_secs_f64();
+    format!(
+        "parse {t_parse:.3} lower {:.3} ({n_lower} nodes) diff {:.3} ({n_diff} nodes) check {:.3} ({checked}) \
+         doc {:.3} ({} B) emit {:.3} ({} B)",
+        t_lower - t_parse,
+        t_diff - t_lower,
+        t_check - t_diff,
+        t_doc - t_check,
+        doc.len(),
+        t_emit - t_doc,
+        out.len()
+    )
+}
+
+/// Time per phase for one hostile family at size `N`:
+/// `HOSTILE=arm N=24 cargo test -p shake-macros --release -- --ignored --nocapture hostile_phases`.
+#[test]
+#[ignore = "a measurement, not a check"]
+fn hostile_phases() {
+    let n: usize = std::env::var("N")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2000);
+    let src = match std::env::var("HOSTILE").unwrap_or_default().as_str() {
+        "nested lets" => hostile::nested_lets(n),
+        "dag" => hostile::dag(n),
+        "poly dag" => hostile::poly_dag(n),
+        "arm angles" => hostile::arm_angles(n),
+        _ => hostile::arm(n),
+    };
+    let s = std::thread::Builder::new()
+        .stack_size(8 << 20)
+        .spawn(move || phases(&src))
+        .expect("thread")
+        .join()
+        .expect("panicked");
+    println!("{s}");
+}
+
+/// The crash classes of issue 13 are compile errors with a message, on a
+/// stack the size of rustc's.
+#[test]
+fn hostile_depths_are_refused_with_a_message() {
+    let cases = [
+        (hostile::parens(1000), "nested too deeply"),
+        (hostile::minus(10_000), "nested too deeply"),
+        (hostile::power_chain(10_000), "nested too deeply"),
+        (hostile::nested_lets(20_000), "`a1001` is nested too deeply"),
+        (
+            hostile::parens(0).replacen(
+                "q[0]",
+                &format!("{} q[0] {}", "if 1 > 2 { q[1] } else ".repeat(10_000), ""),
+                1,
+            ),
+            "nested too deeply",
+        ),
+        (
+            hostile::parens(0).replacen("q[0]", "q[0]^2000000000 * q[0]^2000000000", 1),
+            "exponent too large",
+        ),
+        (
+            hostile::parens(0).replacen("q[0]", "q[0]^1000 * q[0]^1000", 1),
+            "|exponent| 2000",
+        ),
+    ];
+    for (src, msg) in cases {
+        let (_, refused, head) = expand_like_rustc(&src);
+        assert!(refused && head.contains(msg), "{msg}: {head}");
+        // One error, not a cascade.
+        assert_eq!(head.matches("compile_error").count(), 1, "{head}");
+    }
+    // Within the limits: accepted.
+    for src in [
+        hostile::parens(200),
+        hostile::minus(200),
+        hostile::nested_lets(900),
+    ] {
+        let (_, refused, head) = expand_like_rustc(&src);
+        assert!(!refused, "{head}");
+    }
+}
+
+/// A DAG of n `let`s, each using the one before twice, is a tree of 2^n:
+/// the graph (with all derivatives) and the generated code must grow
+/// linearly in n.
+#[test]
+fn shared_lets_cost_linear_work() {
+    let size = |n: usize| {
+        let src = hostile::dag(n);
+        let def: SystemDef = syn::parse_str(&src).expect("parse");
+        let mut sys = lower(&def).expect("lower");
+        let g: Vec<_> = sys.constraints.iter().map(|c| c.node).collect();
+        let _ = crate::diff::Derived::compute(&mut sys.graph, sys.dof, sys.hamiltonian, &g);
+        let out = crate::expand(src.parse().expect("tokens")).to_string();
+        assert!(!out.contains("compile_error"), "{out:.300}");
+        (sys.graph.len(), out.len())
+    };
+    let (n20, o20) = size(20);
+    let (n40, o40) = size(40);
+    println!("nodes {n20} -> {n40}, code {o20} -> {o40} bytes");
+    // Linear: doubling n at most doubles the sizes, up to the fixed part.
+    assert!(n40 <= 2 * n20 + 64, "nodes {n20} -> {n40}");
+    assert!(o40 <= 2 * o20 + 4096, "code {o20} -> {o40}");
+}
+
+/// The emitted values keep a difference squared factored, while the
+/// checks see its expansion (so identities are still decided).
+#[test]
+fn emission_keeps_products_of_sums_factored() {
+    let src = "struct C { dof q[4], p[4]; hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2 + p[3]^2) / 2; \
+               constraints { link: (q[2] - q[0])^2 + (q[3] - q[1])^2 - 1 } }";
+    let def: SystemDef = syn::parse_str(src).expect("parse");
+    let canon = lower(&def).expect("lower");
+    let fact = crate::lower::lower_with(&def, true).expect("lower");
+    let shown = |s: &System| s.graph.display(s.constraints[0].node);
+    assert_eq!(
+        shown(&fact),
+        "-1 + (q[2] - q[0])^2 + (q[3] - q[1])^2",
+        "{}",
+        shown(&fact)
+    );
+    assert!(!shown(&canon).contains('('), "{}", shown(&canon));
+}
+
+/// Friendly errors (issue 14): did-you-mean, `**`, capitalised parameters.
+#[test]
+fn friendly_errors() {
+    let base = |h: &str| {
+        format!(
+            "struct S {{ parameters {{ length, gravity }} coordinates x, y; momenta px, py; \
+             hamiltonian = {h}; constraints {{ rod: x^2 + y^2 - length^2 }} }}"
+        )
+    };
+    let cases = [
+        (base("px^2 + gravty * y"), "did you mean `gravity`?"),
+        (base("pxx^2 + gravity * y"), "did you mean `px`?"),
+        (base("px^2 + Gravity * y"), "did you mean `gravity`?"),
+        (base("px^2 - cso(x)"), "did you mean `cos`?"),
+        (base("px**2"), "write `^` for a power"),
+        (
+            "struct S { parameters { L } dof q[1], p[1]; hamiltonian = p[0]^2 + L * q[0]; }"
+                .to_string(),
+            "parameter `L` is not snake_case",
+        ),
+    ];
+    for (src, msg) in cases {
+        let out = crate::expand(src.parse().expect("tokens")).to_string();
+        assert!(out.contains(msg), "{msg}: {out:.400}");
+    }
+    // Nothing near: no suggestion.
+    let out = crate::expand(base("px^2 + zzzzzz").parse().expect("tokens")).to_string();
+    assert!(
+        out.contains("unknown symbol") && !out.contains("did you mean"),
+        "{out:.300}"
+    );
+}

@@ -1,0 +1,13 @@
+use shake::constrained_system;
+
+// A misspelt parameter: the error names the nearest declared one.
+constrained_system! {
+    pub struct Pendulum {
+        parameters { length, gravity }
+        dof q[2], p[2];
+        hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravty * q[1];
+        constraints { rod: q[0]^2 + q[1]^2 - length^2 }
+    }
+}
+
+fn main() {}
