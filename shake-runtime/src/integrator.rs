@@ -275,6 +275,13 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     det_prev: f64,
     out_q: Vec<f64>,
     out_p: Vec<f64>,
+    /// The kick fractions of the base map when the classical path applies
+    /// (see `classical`), and whether it is used.
+    classical: Option<(f64, f64)>,
+    fast_paths: bool,
+    /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
+    /// (set by the classical step's check and by `begin`).
+    n_fresh: bool,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -289,6 +296,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn new(system: S, base: B, h: f64) -> Self {
         let ws = Workspace::new(&system);
+        let classical = crate::classical::classical::<S, B>(&base);
         Integrator {
             system,
             base,
@@ -305,6 +313,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             det_prev: f64::NAN,
             out_q: vec![0.0; S::DOF],
             out_p: vec![0.0; S::DOF],
+            classical,
+            fast_paths: true,
+            n_fresh: false,
         }
     }
 
@@ -373,6 +384,30 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn compensated(mut self, on: bool) -> Self {
         self.compensated = on;
+        self
+    }
+
+    /// Use the fast paths where they apply (default true): the classical
+    /// SHAKE/RATTLE step for holonomic constraints, separable H with
+    /// quadratic kinetic energy and a kick–drift–kick base map (see
+    /// [`BaseMap::kick_drift_kick`]): one equation in the positions with an
+    /// analytic Jacobian, a projection by one linear solve, and one
+    /// factorisation of N per step for the checks and the projection.
+    /// `false` takes the general path everywhere; both give the same steps
+    /// to round-off (`tests/fast_paths.rs`).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
+    /// let fast = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).step(&z0).unwrap();
+    /// let general = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
+    ///     .fast_paths(false)
+    ///     .step(&z0)
+    ///     .unwrap();
+    /// assert!(fast.distance(&general) < 1e-15);
+    /// ```
+    pub fn fast_paths(mut self, on: bool) -> Self {
+        self.fast_paths = on;
         self
     }
 
@@ -580,6 +615,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         self.reference_norm = nd.norm;
         self.det_prev = nd.det;
+        self.n_fresh = self.classical.is_some();
         Ok(())
     }
 
@@ -626,6 +662,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         step: u64,
         t: f64,
     ) -> Result<StepInfo, StepError> {
+        self.n_fresh = false;
+        if let (Some(kdk), true) = (self.classical, self.fast_paths) {
+            return self.classical_substep(q, p, h, project, step, t, kdk);
+        }
         let opts = self.options;
         // Inside a run the increment is added with Kahan's compensation
         // (its carry is kept across the run's steps).
@@ -729,6 +769,111 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             h,
         )
         .map_err(|e| e.at(step, t))?;
+        Ok(info)
+    }
+
+    /// [`substep`](Self::substep) on the classical path (see `classical`):
+    /// SHAKE with its own Newton iteration, then one evaluation and
+    /// factorisation of N at the new q for the checks and (if `project`)
+    /// for Π, which is one linear solve.
+    #[allow(clippy::too_many_arguments)]
+    fn classical_substep(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        h: f64,
+        project: bool,
+        step: u64,
+        t: f64,
+        kdk: (f64, f64),
+    ) -> Result<StepInfo, StepError> {
+        let opts = self.options;
+        let carry = if self.compensated && self.carrying {
+            Some(self.carry.as_mut_slice())
+        } else {
+            None
+        };
+        let report = crate::classical::shake_step(
+            &self.system,
+            kdk,
+            h,
+            q,
+            p,
+            &mut self.ws,
+            &opts.newton,
+            carry,
+        )
+        .map_err(|e| e.at(step, t))?;
+        let mut info = StepInfo {
+            shake_iterations: report.iterations,
+            lambda: report.lambda,
+            ..StepInfo::default()
+        };
+        if !q.iter().chain(p.iter()).all(|x| x.is_finite()) {
+            return Err(StepError::NonFinite {
+                what: "state",
+                step,
+                t,
+            });
+        }
+        // g at the new state was the last residual of SHAKE's iteration
+        // (the state is z0 + Δ, rounded once more by the addition).
+        let residual = self.ws.g.iter().fold(0.0f64, |a, x| {
+            if x.is_nan() || x.abs() > a {
+                x.abs()
+            } else {
+                a
+            }
+        });
+        if !(residual <= opts.constraint_tolerance) {
+            return Err(StepError::NewtonNotConverged {
+                stage: Stage::Shake,
+                step,
+                t,
+                source: SolveError::NotConverged {
+                    iterations: report.iterations,
+                    residual,
+                },
+            });
+        }
+        let nd = check_nondegeneracy(&self.system, q, p, &mut self.ws);
+        info.condition = nd.condition(self.reference_norm);
+        info.det_n = nd.det;
+        if !(info.condition <= opts.max_condition) {
+            return Err(StepError::NondegeneracyLost {
+                stage: if project { Stage::Rattle } else { Stage::Shake },
+                step,
+                t,
+                condition: info.condition,
+                limit: opts.max_condition,
+            });
+        }
+        if opts.check_component
+            && self.det_prev.is_finite()
+            && nd.det.signum() != self.det_prev.signum()
+        {
+            return Err(StepError::ComponentJump {
+                step,
+                t,
+                det_before: self.det_prev,
+                det_after: nd.det,
+            });
+        }
+        self.det_prev = nd.det;
+        opts.check_jump(
+            Stage::Shake,
+            report.lambda_correction,
+            report.lambda_predicted,
+            report.lambda,
+            h,
+        )
+        .map_err(|e| e.at(step, t))?;
+        self.n_fresh = true;
+        if project {
+            // Linear in σ: one solve, no second root to jump to.
+            crate::classical::project(&self.system, q, p, &mut self.ws);
+            info.rattle_iterations = 1;
+        }
         Ok(info)
     }
 
@@ -927,7 +1072,16 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         scratch.q.as_mut_slice().copy_from_slice(q);
         scratch.p.as_mut_slice().copy_from_slice(p);
         let mut rattle_iterations = 0;
-        if self.method == Method::Rattle && !projected {
+        if self.method == Method::Rattle && !projected && self.n_fresh && self.fast_paths {
+            // The classical path: N at this q is factorised and checked.
+            crate::classical::project(
+                &self.system,
+                scratch.q.as_slice(),
+                scratch.p.as_mut_slice(),
+                &mut self.ws,
+            );
+            rattle_iterations = 1;
+        } else if self.method == Method::Rattle && !projected {
             let pr = project_hidden(
                 &self.system,
                 scratch.q.as_mut_slice(),

@@ -50,6 +50,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod base_map;
+mod classical;
 pub mod compensated;
 pub mod composition;
 pub mod diagnostics;
