@@ -268,8 +268,9 @@ fn memory() {
     let traj = out.into_result().expect("a regular run");
     let len = traj.len() as f64;
     println!(
-        "memory system=pendulum states={} bytes={:.1}MB bytes_per_state={:.1} rss_growth={:.1}MB rss_per_state={:.1}",
+        "memory system=pendulum states={} state_bytes={:.1}MB bytes={:.1}MB bytes_per_state={:.1} rss_growth={:.1}MB rss_per_state={:.1}",
         traj.len(),
+        traj.state_bytes() as f64 / 1e6,
         (live1 - live0) as f64 / 1e6,
         (live1 - live0) as f64 / len,
         rss1.saturating_sub(rss0) as f64 / 1e6,
@@ -279,9 +280,22 @@ fn memory() {
 }
 
 fn main() {
-    print("pendulum", &pendulum(20_000));
-    print("chain_4", &chain::<4, _>(Chain4::new(1.0, 1.0), 10_000));
-    print("chain_16", &chain::<16, _>(Chain16::new(1.0, 1.0), 4_000));
-    print("chain_64", &chain::<64, _>(Chain64::new(1.0, 1.0), 1_000));
-    memory();
+    // `OVERHEAD_ONLY=chain_16` measures one system (for profiling).
+    let only = std::env::var("OVERHEAD_ONLY").ok();
+    let want = |name: &str| only.as_deref().map_or(true, |o| o == name);
+    if want("pendulum") {
+        print("pendulum", &pendulum(20_000));
+    }
+    if want("chain_4") {
+        print("chain_4", &chain::<4, _>(Chain4::new(1.0, 1.0), 10_000));
+    }
+    if want("chain_16") {
+        print("chain_16", &chain::<16, _>(Chain16::new(1.0, 1.0), 4_000));
+    }
+    if want("chain_64") {
+        print("chain_64", &chain::<64, _>(Chain64::new(1.0, 1.0), 1_000));
+    }
+    if want("memory") {
+        memory();
+    }
 }

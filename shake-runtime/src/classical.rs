@@ -20,9 +20,12 @@
 //! updates Δ_k contracting by θ = ‖Δ_k‖/‖Δ_{k−1}‖ < ½, the remaining error
 //! is at most θ/(1−θ)·‖Δ_k‖, and when that is below 4ε‖λ‖ the next update
 //! could not change λ (Hairer & Wanner, *Solving ODEs II*, IV.8): no
-//! confirming iteration is spent. Nor is one spent once the residual is at
-//! round-off: when every |g_i(q1)| is below 4ε Σ_k |∂g_i/∂q_k| |q_k| (what
-//! rounding q1 in its last bits changes g_i by), no update can bring q1
+//! confirming iteration is spent. Below 4ε‖λ‖ means below the round-off
+//! of λ itself, or below the round-off that g's own rounding puts into λ
+//! (the floor of g below, through J⁻¹, whose size the first update
+//! shows as ‖Δ₁‖/‖r(0)‖), whichever is larger. Nor is one spent once the residual is at
+//! round-off: when every |g_i(q1)| is below ε Σ_k |∂g_i/∂q_k| |q_k| (what
+//! rounding q1 in its last bit changes g_i by), no update can bring q1
 //! closer to M, and the iteration stops there. (The general path's rule still holds:
 //! an update below 4ε‖λ‖ stops it, and so does stagnation at the noise
 //! floor with a fresh Jacobian.)
@@ -158,10 +161,12 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     }
     sys.constraint_jacobian(q, p, &mut ws.g_z_y);
     // The round-off level of each g_i near q0: what rounding q to its
-    // last bits changes it by, 4ε Σ_k |∂g_i/∂q_k| |q_k|.
+    // last bit changes it by, ε Σ_k |∂g_i/∂q_k| |q_k|. (Not more: the
+    // momenta come out of λ divided by h, so a residual left 4 times above
+    // this shows in p as 4 times the round-off of a converged step.)
     ws.cl_floor.fill(0.0);
     for &(i, k) in &ws.cl_pattern {
-        ws.cl_floor[i] += 4.0 * f64::EPSILON * (ws.g_z_y[i + k * m] * q[k]).abs();
+        ws.cl_floor[i] += f64::EPSILON * (ws.g_z_y[i + k * m] * q[k]).abs();
     }
     residual(sys, h, ws, true);
     let mut report = ShakeReport::default();
@@ -170,6 +175,10 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     let mut prev = f64::INFINITY;
     let mut refreshed = false;
     let mut need_jacobian = true;
+    // The round-off level of λ: the floor of g seen through J⁻¹, whose size
+    // the first update shows (‖Δ₁‖/‖r(0)‖).
+    let mut lambda_noise = 0.0;
+    let mut r_first = 0.0;
     let not_finite =
         |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
     loop {
@@ -190,6 +199,9 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
                     residual: r,
                 },
             ));
+        }
+        if iterations == 0 {
+            r_first = r;
         }
         if need_jacobian {
             // At λ = 0, once the residual is seen to need it.
@@ -235,11 +247,15 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
                 }
             }
         }
-        let tol = opts.step_tolerance * size;
+        if iterations == 1 {
+            lambda_noise = step / r_first * norm_inf(&ws.cl_floor);
+        }
+        let tol = (opts.step_tolerance * size).max(lambda_noise);
         let theta = step / prev;
         prev = step;
         // An update at round-off; or a contraction that proves the next
-        // one would be.
+        // one would be (the remaining error of a linear iteration with
+        // ratio θ is at most θ/(1−θ) times the last update).
         if step <= tol || (iterations > 1 && theta < 0.5 && theta / (1.0 - theta) * step <= tol) {
             break;
         }

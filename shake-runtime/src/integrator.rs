@@ -6,7 +6,7 @@
 //! let z0 = rattle.project_to_hidden(&State::from_slices(&[0.6, -0.8], &[0.8, 0.6])).unwrap();
 //! let out = rattle.run(z0, Stop::Time(1.0)).stride(10).execute();
 //! assert!(out.error.is_none());
-//! assert_eq!(out.trajectory.states.len(), 11);
+//! assert_eq!(out.trajectory.len(), 11);
 //! ```
 
 use crate::base_map::BaseMap;
@@ -19,6 +19,7 @@ use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
 use crate::shake::{shake_step, Workspace};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
+pub use crate::trajectory::Trajectory;
 
 /// Which map a step is: SHAKE S_h (onto M) or RATTLE R_h = Π ∘ S_h (onto M^H).
 ///
@@ -161,49 +162,6 @@ pub enum Stop {
     /// n = (T − t0)/h steps, rounded to the nearest integer when within
     /// 1e-9 of it and up otherwise (the step size never changes).
     Time(f64),
-}
-
-/// The stored states of a run: `states[i]` at step `steps[i]`, time
-/// `times[i]`, with `diagnostics[i]` when diagnostics are on.
-///
-/// ```
-/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-/// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
-/// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
-/// let traj = integ.run(z0, Stop::Steps(4)).execute().trajectory;
-/// assert_eq!(traj.steps, vec![0, 1, 2, 3, 4]);
-/// assert_eq!(traj.len(), 5);
-/// ```
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Trajectory {
-    /// Step indices of the stored states.
-    pub steps: Vec<u64>,
-    /// Their times t0 + k h.
-    pub times: Vec<f64>,
-    /// The states (on M^H for RATTLE, on M for SHAKE).
-    pub states: Vec<State>,
-    /// Diagnostics, one per state, when enabled (empty otherwise).
-    pub diagnostics: Vec<DiagnosticRecord>,
-}
-
-impl Trajectory {
-    /// Number of stored states.
-    ///
-    /// ```
-    /// assert_eq!(shake_runtime::Trajectory::default().len(), 0);
-    /// ```
-    pub fn len(&self) -> usize {
-        self.times.len()
-    }
-
-    /// True when nothing was stored.
-    ///
-    /// ```
-    /// assert!(shake_runtime::Trajectory::default().is_empty());
-    /// ```
-    pub fn is_empty(&self) -> bool {
-        self.times.is_empty()
-    }
 }
 
 /// The result of a run: the trajectory computed so far and, if the run
@@ -1145,9 +1103,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         observer(k, t, scratch);
         if store {
-            traj.steps.push(k);
-            traj.times.push(t);
-            traj.states.push(scratch.clone());
+            traj.push(k, scratch.q.as_slice(), scratch.p.as_slice());
         }
         Ok(())
     }
@@ -1163,7 +1119,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 ///     .stride(5)
 ///     .start_time(1.0)
 ///     .execute();
-/// assert_eq!(out.trajectory.times, vec![1.0, 1.5, 2.0]);
+/// assert_eq!(out.trajectory.times(), vec![1.0, 1.5, 2.0]);
 /// ```
 #[must_use = "a run does nothing until `execute` is called"]
 pub struct Run<'a, S: ConstrainedSystem, B: BaseMap, F> {
@@ -1184,7 +1140,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
     /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(7)).stride(3).execute();
-    /// assert_eq!(out.trajectory.steps, vec![0, 3, 6, 7]);
+    /// assert_eq!(out.trajectory.steps(), vec![0, 3, 6, 7]);
     /// ```
     pub fn stride(mut self, k: u64) -> Self {
         self.stride = k;
@@ -1197,7 +1153,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
     /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.5);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Time(3.0)).start_time(2.0).execute();
-    /// assert_eq!(out.trajectory.times, vec![2.0, 2.5, 3.0]);
+    /// assert_eq!(out.trajectory.times(), vec![2.0, 2.5, 3.0]);
     /// ```
     pub fn start_time(mut self, t0: f64) -> Self {
         self.t0 = t0;
@@ -1313,6 +1269,17 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 }
             }
         };
+        // Exactly the states the run will store: 0, s, 2s, …, and the last.
+        let capacity = if store {
+            // (reserved up to 256 MB; a longer run grows the buffer)
+            let budget = (1usize << 28) / (16 * S::DOF.max(1));
+            usize::try_from(n / stride + 2)
+                .unwrap_or(usize::MAX)
+                .min(budget)
+        } else {
+            0
+        };
+        traj = Trajectory::new(S::DOF, t0, h, stride, capacity);
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
         let mut p: Vec<f64> = z0.p.as_slice().to_vec();
         let mut prev_q = q.clone();

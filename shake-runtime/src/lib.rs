@@ -66,6 +66,7 @@ pub mod rattle;
 mod shake;
 mod state;
 pub mod system;
+mod trajectory;
 mod unconstrained;
 
 pub use base_map::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
