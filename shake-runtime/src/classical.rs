@@ -113,8 +113,8 @@ fn jacobian<S: ConstrainedSystem>(
     for c in 0..groups {
         // v = −G0ᵀ s_c, s_c the indicator of the columns j ≡ c; w = h A v.
         ws.cl_v.fill(0.0);
-        for &(i, k) in &ws.cl_pattern {
-            if i % groups == c {
+        for (&(i, k), &grp) in ws.cl_pattern.iter().zip(&ws.cl_group) {
+            if grp == c {
                 ws.cl_v[k] -= ws.g_z_y[i + k * m];
             }
         }
@@ -232,7 +232,8 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
             // small root, in the form without cancellation, is then exact;
             // for any other g it is a better iterate than λ1 and the
             // iteration goes on from it. Either way the residual decides.
-            let (l1, r1) = (ws.lambda[0], ws.jac[0]);
+            // (The factorised 1×1 Jacobian holds 1/J(0).)
+            let (l1, r1) = (ws.lambda[0], 1.0 / ws.jac[0]);
             let r2 = ws.g[0] / (l1 * l1);
             let disc = r1 * r1 - 4.0 * r0 * r2;
             if disc >= 0.0 && r1 != 0.0 {

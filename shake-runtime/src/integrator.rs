@@ -240,6 +240,14 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
     /// (set by the classical step's check and by `begin`).
     n_fresh: bool,
+    /// The last result of `step_in_place`, already checked (with ‖N‖₁
+    /// and det N there), so that the next call need not check it again.
+    checked: Vec<f64>,
+    checked_valid: bool,
+    checked_norm: f64,
+    checked_det: f64,
+    /// ‖N‖₁ at the result of the last substep.
+    last_norm: f64,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -274,6 +282,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             classical,
             fast_paths: true,
             n_fresh: false,
+            checked: vec![0.0; 2 * S::DOF],
+            checked_valid: false,
+            checked_norm: f64::NAN,
+            checked_det: f64::NAN,
+            last_norm: f64::NAN,
         }
     }
 
@@ -719,6 +732,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         self.det_prev = nd.det;
+        self.last_norm = nd.norm;
         opts.check_jump(
             Stage::Shake,
             report.lambda_correction,
@@ -818,6 +832,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         self.det_prev = nd.det;
+        self.last_norm = nd.norm;
         opts.check_jump(
             Stage::Shake,
             report.lambda_correction,
@@ -851,7 +866,24 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn step_in_place(&mut self, z: &mut State) -> Result<StepInfo, StepError> {
         self.check_dims(z)?;
-        self.begin(z.q.as_slice(), z.p.as_slice(), 0, 0.0)?;
+        let d = S::DOF;
+        if self.fast_paths
+            && self.checked_valid
+            && S::CONSTRAINTS > 0
+            && z.q.as_slice() == &self.checked[..d]
+            && z.p.as_slice() == &self.checked[d..]
+        {
+            // The result of the last step, checked there (finite, on M,
+            // N's condition relative to the step before, which bounds the
+            // condition begin() would compute): take its N as this step's
+            // reference instead of evaluating and factorising it again.
+            self.check_h()?;
+            self.reference_norm = self.checked_norm;
+            self.det_prev = self.checked_det;
+        } else {
+            self.checked_valid = false;
+            self.begin(z.q.as_slice(), z.p.as_slice(), 0, 0.0)?;
+        }
         self.carrying = false;
         self.out_q.copy_from_slice(z.q.as_slice());
         self.out_p.copy_from_slice(z.p.as_slice());
@@ -861,6 +893,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         if res.is_ok() {
             z.q.as_mut_slice().copy_from_slice(&q);
             z.p.as_mut_slice().copy_from_slice(&p);
+            self.checked[..d].copy_from_slice(&q);
+            self.checked[d..].copy_from_slice(&p);
+            self.checked_valid = true;
+            self.checked_norm = self.last_norm;
+            self.checked_det = self.det_prev;
         }
         self.out_q = q;
         self.out_p = p;

@@ -125,6 +125,8 @@ pub(crate) struct Workspace {
     // The classical path (see `classical`).
     /// The entries (i, k) of `JACOBIAN_PATTERN` with k < d (∂g_i/∂q_k).
     pub(crate) cl_pattern: Vec<(usize, usize)>,
+    /// The column group (i mod groups) of each entry of `cl_pattern`.
+    pub(crate) cl_group: Vec<usize>,
     /// −a h ∇V(q0), the first kick.
     pub(crate) cl_kick: Vec<f64>,
     /// The momentum increment before the last kick.
@@ -199,6 +201,11 @@ impl Workspace {
                 .iter()
                 .copied()
                 .filter(|&(i, k)| i < m && k < d)
+                .collect(),
+            cl_group: S::JACOBIAN_PATTERN
+                .iter()
+                .filter(|&&(i, k)| i < m && k < d)
+                .map(|&(i, _)| i % groups)
                 .collect(),
             cl_kick: vec![0.0; d],
             cl_u: vec![0.0; d],
