@@ -190,21 +190,19 @@ fn band_lu_solve_w(lu: &[f64], n: usize, kl: usize, kv: usize, piv: &[usize], b:
         if p != k {
             b.swap(k, p);
         }
+        // (No test for bk = 0: in a narrow band the branch costs more
+        // than the few products it would skip.)
         let bk = b[k];
-        if bk != 0.0 {
-            for i in k + 1..=(k + kl).min(n - 1) {
-                b[i] -= lu[i + k * n] * bk;
-            }
+        for i in k + 1..=(k + kl).min(n - 1) {
+            b[i] -= lu[i + k * n] * bk;
         }
     }
     // U x = b (U's diagonal is stored inverted).
     for j in (0..n).rev() {
-        b[j] *= lu[j + j * n];
-        let bj = b[j];
-        if bj != 0.0 {
-            for i in j.saturating_sub(kv)..j {
-                b[i] -= lu[i + j * n] * bj;
-            }
+        let bj = b[j] * lu[j + j * n];
+        b[j] = bj;
+        for i in j.saturating_sub(kv)..j {
+            b[i] -= lu[i + j * n] * bj;
         }
     }
 }
