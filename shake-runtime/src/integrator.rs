@@ -1306,11 +1306,12 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 }
             }
         };
-        // Exactly the states the run will store: 0, s, 2s, …, and the last.
+        // Exactly the states the run will store: 0, s, 2s, …, and the last
+        // (a failing run may add its last good state: the buffer grows).
         let capacity = if store {
             // (reserved up to 256 MB; a longer run grows the buffer)
             let budget = (1usize << 28) / (16 * S::DOF.max(1));
-            usize::try_from(n / stride + 2)
+            usize::try_from(n / stride + 1 + u64::from(n % stride != 0))
                 .unwrap_or(usize::MAX)
                 .min(budget)
         } else {
