@@ -41,7 +41,7 @@ fn main() {
     // On the exact circle q = 0.8 (cos θ, sin θ), p = 0.6 (−sin θ, cos θ);
     // one step turns by about ω h, so the angle is unwrapped step by step.
     let mut angle = 0.0;
-    for (k, (s, t)) in traj.states.iter().zip(&traj.times).enumerate() {
+    for (k, (s, t)) in traj.states().zip(traj.times()).enumerate() {
         let a = s.q[1].atan2(s.q[0]);
         angle += (a - angle + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
             - std::f64::consts::PI;
@@ -55,7 +55,7 @@ fn main() {
             );
         }
     }
-    let t = traj.times.last().unwrap();
+    let t = *traj.times().last().unwrap();
     println!(
         "\nnumerical angular speed ω_h = {:.8}: ω_h/ω − 1 = {:.3e} (O(h²)); the points stay on the circle",
         angle / t,

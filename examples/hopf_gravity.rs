@@ -67,7 +67,7 @@ fn main() {
     println!(
         "RATTLE kept {} states, up to t = {:.1}; the exact solution reaches a fold at t ≈ 2.08",
         out.trajectory.len(),
-        out.trajectory.times.last().unwrap()
+        out.trajectory.times().last().unwrap()
     );
     match out.error {
         Some(e) => println!("stopped: {e}"),

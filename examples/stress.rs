@@ -310,7 +310,7 @@ fn there_and_back<S: ConstrainedSystem + Clone, B: BaseMap>(
         .execute()
         .into_result()
         .map_err(|(_, e)| e.to_string())?;
-    let z1 = fwd.states.last().expect("the last state").clone();
+    let z1 = fwd.last().expect("the last state");
     let back = integ
         .with_step_size(-h)
         .run(z1, Stop::Steps(n))
@@ -318,7 +318,7 @@ fn there_and_back<S: ConstrainedSystem + Clone, B: BaseMap>(
         .execute()
         .into_result()
         .map_err(|(_, e)| e.to_string())?;
-    let z2 = back.states.last().expect("the last state");
+    let z2 = &back.last().expect("the last state");
     Ok(sys.hamiltonian(z2.q.as_slice(), z2.p.as_slice())
         - sys.hamiltonian(z0.q.as_slice(), z0.p.as_slice()))
 }

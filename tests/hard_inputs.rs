@@ -164,12 +164,12 @@ fn negative_step_sizes_integrate_backwards() {
     for c in [Composition::SINGLE, Composition::SUZUKI_5] {
         let mut fwd = Integrator::new(sys, ImplicitMidpoint, 0.1).composed(c);
         let z1 = fwd.run(z0.clone(), Stop::Time(2.0)).execute();
-        let z1 = z1.trajectory.states.last().unwrap().clone();
+        let z1 = z1.trajectory.last().unwrap();
         let mut back = Integrator::new(sys, ImplicitMidpoint, -0.1).composed(c);
         let out = back.run(z1, Stop::Time(-2.0)).execute();
-        let zb = out.trajectory.states.last().unwrap();
+        let zb = &out.trajectory.last().unwrap();
         assert!(zb.distance(&z0) < 1e-13, "{}", zb.distance(&z0));
-        assert!((out.trajectory.times[20] + 2.0).abs() < 1e-15);
+        assert!((out.trajectory.time(20) + 2.0).abs() < 1e-15);
     }
 }
 

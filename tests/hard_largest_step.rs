@@ -65,7 +65,8 @@ fn attempt<S: ConstrainedSystem + Clone, B: BaseMap>(
         .execute();
     let e0 = sys.hamiltonian(z0.q.as_slice(), z0.p.as_slice());
     let mut de: f64 = 0.0;
-    for z in &out.trajectory.states {
+    for z in out.trajectory.states() {
+        let z = &z;
         let (g, gh) = residuals(sys, z);
         let scale = 1.0 + z.q.amax().max(z.p.amax()).powi(2);
         assert!(

@@ -122,9 +122,10 @@ fn check_base<S: ConstrainedSystem + Clone, B: BaseMap>(
     let out = integ.run(z0.clone(), Stop::Steps(20)).execute();
     prop_assert!(!out.trajectory.is_empty());
     if let Some(e) = &out.error {
-        prop_assert_eq!(*out.trajectory.steps.last().unwrap() + 1, e.step());
+        prop_assert_eq!(*out.trajectory.steps().last().unwrap() + 1, e.step());
     }
-    for z in &out.trajectory.states {
+    for z in out.trajectory.states() {
+        let z = &z;
         let (g, gh) = residuals(&sys, z);
         let scale = (1.0 + coeff) * (1.0 + z.q.amax().max(z.p.amax()).powi(2));
         prop_assert!(g <= 1e-13 * scale, "|g| = {:e}", g);

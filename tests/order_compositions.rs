@@ -87,8 +87,8 @@ fn errors<S: ConstrainedSystem + Clone, B: BaseMap>(
                 .into_result()
                 .unwrap_or_else(|(_, e)| panic!("{} at h = {h}: {e}", c.name()));
             assert_eq!(traj.len(), SAMPLES as usize + 1);
-            traj.states[1..]
-                .iter()
+            traj.states()
+                .skip(1)
                 .zip(exact)
                 .map(|(z, ze)| (z.to_vector() - ze).amax())
                 .fold(0.0, f64::max)
@@ -347,7 +347,7 @@ fn backward_runs_have_the_same_order() {
                     .execute()
                     .into_result()
                     .unwrap();
-                (traj.states.last().unwrap().to_vector() - &exact).amax()
+                (traj.last().unwrap().to_vector() - &exact).amax()
             })
             .collect();
         let steps: Vec<f64> = counts.iter().map(|&n| 2.0 / n as f64).collect();

@@ -56,7 +56,7 @@ fn run_states<S: ConstrainedSystem + Copy, B: BaseMap>(
     let mut integ = if shake { integ.shake() } else { integ.rattle() };
     let out = integ.run(z0, Stop::Steps(n)).execute();
     assert!(out.error.is_none(), "{:?}", out.error);
-    out.trajectory.states
+    out.trajectory.states().collect()
 }
 
 /// Claim 1: SHAKE and RATTLE with each base map keep |g| at round-off,

@@ -147,7 +147,8 @@ impl<S: ConstrainedSystem> ConstrainedSystem for Counting<'_, S> {
 const STEPS: u64 = 1000;
 
 /// The counts of STEPS calls of `step_in_place` (RATTLE projects every
-/// step; each call checks N at its input and at its result).
+/// step; each call checks N at its result, and at its input unless the
+/// input is the result of the call before).
 fn counts<S: ConstrainedSystem + Clone, B: BaseMap>(
     name: &str,
     sys: S,
@@ -217,12 +218,21 @@ fn the_classical_shake_evaluates_no_second_derivative_and_no_jacobian() {
             row[2], 0,
             "{name}: Hessian of H evaluated by classical SHAKE"
         );
-        assert_eq!(row[4], 0, "{name}: g_z evaluated by classical SHAKE");
+        // g_z at the start of a step and at the iterate where the
+        // (analytic, banded) Jacobian −h G(q1) A G(q0)ᵀ is formed: usually
+        // twice per step, never per residual.
+        assert!(
+            row[4] as u64 <= 3 * STEPS,
+            "{name}: g_z evaluated {} times by classical SHAKE",
+            row[4]
+        );
         assert_eq!(row[5], 0, "{name}: Σλ∇²g evaluated by classical SHAKE");
         assert_eq!(row[6], 0, "{name}: {{g,H}} evaluated by SHAKE");
         assert_eq!(row[7], 0, "{name}: ∇{{g,H}} evaluated");
-        // N at the input and at the result of each step (the checks).
-        assert_eq!(row[8] as u64, 2 * STEPS, "{name}: N evaluations");
+        // N once per step, at its result: the input of each call but the
+        // first is the result of the one before, already checked (+1: the
+        // first call checks its input).
+        assert_eq!(row[8] as u64, STEPS + 1, "{name}: N evaluations");
         assert!(row[9] > 0, "{name}: the closed-form fibre flow is used");
     }
     for (name, row) in [
@@ -235,7 +245,12 @@ fn the_classical_shake_evaluates_no_second_derivative_and_no_jacobian() {
             counts("chain of 8", c, StormerVerlet, true, &chain),
         ),
     ] {
-        assert_eq!(row[2] + row[4] + row[5] + row[7], 0, "{name}: RATTLE, SV");
+        assert_eq!(row[2] + row[5] + row[7], 0, "{name}: RATTLE, SV");
+        assert!(
+            row[4] as u64 <= 3 * STEPS,
+            "{name}: RATTLE, SV: g_z {}",
+            row[4]
+        );
         assert!(row[6] >= STEPS as usize, "{name}: {{g,H}} {}", row[6]);
     }
     // The midpoint rule needs the Hessian of H (its stage Newton and the

@@ -46,7 +46,7 @@ fn errors<S: ConstrainedSystem + Clone, B: BaseMap>(
                 .execute()
                 .into_result()
                 .unwrap();
-            let er = (to_dvec(zr.states.last().unwrap()) - exact).amax();
+            let er = (to_dvec(&zr.last().unwrap()) - exact).amax();
             let mut shake = Integrator::new(sys.clone(), base, h).shake();
             let zs = shake
                 .run(z0.clone(), Stop::Time(T))
@@ -54,7 +54,7 @@ fn errors<S: ConstrainedSystem + Clone, B: BaseMap>(
                 .execute()
                 .into_result()
                 .unwrap();
-            let projected = shake.project(zs.states.last().unwrap()).unwrap();
+            let projected = shake.project(&zs.last().unwrap()).unwrap();
             let es = (to_dvec(&projected) - exact).amax();
             (er, es)
         })
@@ -191,7 +191,8 @@ fn hopf_free_rattle_stays_on_the_exact_trajectory() {
         .into_result()
         .unwrap();
         let mut worst: f64 = 0.0;
-        for z in &traj.states {
+        for z in traj.states() {
+            let z = &z;
             // The exact trajectory is q(t) = R(ωt) q0, p(t) = R(ωt) p0: find
             // the angle from q and check p (and |q|) against it.
             let angle = z.q[1].atan2(z.q[0]);

@@ -73,8 +73,8 @@ fn check_all<S: ConstrainedSystem + Clone, B: BaseMap>(
         .unwrap_or_else(|(_, e)| {
             panic!("{name}/{}: RATTLE failed: {e}", B::NAME);
         });
-    for z in &r_traj.states {
-        let (g, gh) = residuals(&sys, z);
+    for z in r_traj.states() {
+        let (g, gh) = residuals(&sys, &z);
         out.g_max = out.g_max.max(g);
         out.hidden_rattle_max = out.hidden_rattle_max.max(gh);
     }
@@ -87,10 +87,10 @@ fn check_all<S: ConstrainedSystem + Clone, B: BaseMap>(
         .execute()
         .into_result()
         .unwrap();
-    for (k, z) in l_traj.steps.iter().zip(&l_traj.states) {
+    for (k, z) in l_traj.steps().iter().zip(l_traj.states()) {
         out.lazy_vs_eager = out
             .lazy_vs_eager
-            .max(z.distance(&r_traj.states[*k as usize]));
+            .max(z.distance(&r_traj.state(*k as usize)));
     }
 
     // SHAKE; Π ∘ Sᵏ = Π ∘ Rᵏ; the hidden residual is O(h).
@@ -103,8 +103,8 @@ fn check_all<S: ConstrainedSystem + Clone, B: BaseMap>(
             .unwrap();
         let mut hidden: f64 = 0.0;
         let mut g_max: f64 = 0.0;
-        for z in traj.states.iter().skip(1) {
-            let (g, gh) = residuals(&sys, z);
+        for z in traj.states().skip(1) {
+            let (g, gh) = residuals(&sys, &z);
             g_max = g_max.max(g);
             hidden = hidden.max(gh);
         }
@@ -113,9 +113,9 @@ fn check_all<S: ConstrainedSystem + Clone, B: BaseMap>(
     let (s_traj, hidden_h, g_shake, mut shake) = shake_hidden(h, steps);
     out.g_max = out.g_max.max(g_shake);
     out.hidden_shake_max = hidden_h;
-    for (k, z) in s_traj.states.iter().enumerate() {
-        let pz = shake.project(z).unwrap();
-        out.shake_vs_rattle = out.shake_vs_rattle.max(pz.distance(&r_traj.states[k]));
+    for (k, z) in s_traj.states().enumerate() {
+        let pz = shake.project(&z).unwrap();
+        out.shake_vs_rattle = out.shake_vs_rattle.max(pz.distance(&r_traj.state(k)));
     }
     let (_, hidden_h2, _, _) = shake_hidden(h / 2.0, 2 * steps);
     out.hidden_shake_ratio = hidden_h / hidden_h2;
@@ -124,9 +124,9 @@ fn check_all<S: ConstrainedSystem + Clone, B: BaseMap>(
     if B::SYMMETRIC {
         let mut fwd = Integrator::new(sys.clone(), base, h).rattle();
         let mut bwd = Integrator::new(sys.clone(), base, -h).rattle();
-        for z in r_traj.states.iter().step_by(7) {
-            let back = bwd.step(&fwd.step(z).unwrap()).unwrap();
-            out.symmetry = out.symmetry.max(back.distance(z));
+        for z in r_traj.states().step_by(7) {
+            let back = bwd.step(&fwd.step(&z).unwrap()).unwrap();
+            out.symmetry = out.symmetry.max(back.distance(&z));
         }
     }
 
@@ -440,5 +440,5 @@ fn run_free<B: BaseMap>(sys: shake::Unconstrained<Pendulum>, base: B, z0: &State
         .execute()
         .into_result()
         .unwrap();
-    out.states.last().unwrap().q[1]
+    out.last().unwrap().q[1]
 }

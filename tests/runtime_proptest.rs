@@ -49,20 +49,22 @@ fn property<S: ConstrainedSystem + Clone, B: BaseMap>(
         );
         if let Some(e) = &out.error {
             // The partial trajectory ends just before the failing step.
-            prop_assert_eq!(*out.trajectory.steps.last().unwrap() + 1, e.step());
+            prop_assert_eq!(*out.trajectory.steps().last().unwrap() + 1, e.step());
         }
-        for z in &out.trajectory.states {
+        for z in out.trajectory.states() {
+            let z = &z;
             let (g, _) = residuals(&sys, z);
             prop_assert!(g <= 1e-13 * scale(z), "|g| = {:e}", g);
         }
     }
-    for z in &r.trajectory.states {
+    for z in r.trajectory.states() {
+        let z = &z;
         let (_, gh) = residuals(&sys, z);
         prop_assert!(gh <= 1e-12 * scale(z), "|{{g,H}}| = {:e}", gh);
     }
     if r.error.is_none() && s.error.is_none() {
-        let zs = shake.project(s.trajectory.states.last().unwrap()).unwrap();
-        let zr = r.trajectory.states.last().unwrap();
+        let zs = shake.project(&s.trajectory.last().unwrap()).unwrap();
+        let zr = &r.trajectory.last().unwrap();
         prop_assert!(
             zs.distance(zr) <= 1e-11 * scale(zr),
             "Π∘Sᵏ vs Π∘Rᵏ: {:e}",

@@ -162,6 +162,23 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
         false
     }
 
+    /// For a separable H = T(p) + V(q), this map as a kick–drift–kick
+    /// p* = p0 − a h ∇V(q0), q1 = q0 + h ∇T(p*), p1 = p* − b h ∇V(q1):
+    /// `Some((a, b))`, or `None` when it is not of that form. SHAKE and
+    /// RATTLE then take the classical path for holonomic constraints and a
+    /// quadratic T (see `classical`): one equation in the positions, no
+    /// base-map or fibre-flow call in its Newton iteration.
+    ///
+    /// ```
+    /// use shake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
+    /// assert_eq!(StormerVerlet.kick_drift_kick(), Some((0.5, 0.5)));
+    /// assert_eq!(SymplecticEuler.kick_drift_kick(), Some((1.0, 0.0)));
+    /// assert_eq!(ImplicitMidpoint.kick_drift_kick(), None);
+    /// ```
+    fn kick_drift_kick(&self) -> Option<(f64, f64)> {
+        None
+    }
+
     /// z ← φ_h(z) in place; returns the number of Newton iterations of its
     /// stage equations (0 when explicit).
     fn apply<S: Hamiltonian>(
@@ -604,6 +621,10 @@ impl BaseMap for StormerVerlet {
         S::SEPARABLE
     }
 
+    fn kick_drift_kick(&self) -> Option<(f64, f64)> {
+        Some((0.5, 0.5))
+    }
+
     fn apply<S: Hamiltonian>(
         &self,
         sys: &S,
@@ -836,6 +857,10 @@ impl BaseMap for SymplecticEuler {
 
     fn explicit_for<S: Hamiltonian>() -> bool {
         S::SEPARABLE
+    }
+
+    fn kick_drift_kick(&self) -> Option<(f64, f64)> {
+        Some((1.0, 0.0))
     }
 
     fn apply<S: Hamiltonian>(

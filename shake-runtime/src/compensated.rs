@@ -51,7 +51,7 @@
 //! let comp = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
 //!     .run(z0, Stop::Steps(1000)).stride(1000).execute().trajectory;
 //! // The same method: the two runs differ by round-off only.
-//! assert!(plain.states[1].distance(&comp.states[1]) < 1e-12);
+//! assert!(plain.state(1).distance(&comp.state(1)) < 1e-12);
 //! ```
 
 /// s ← s + x with Kahan's compensation c (c holds minus the lost low bits).

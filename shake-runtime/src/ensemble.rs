@@ -83,7 +83,7 @@ where
 ///     .map(|k| State::from_slices(&[0.0, -1.0], &[0.1 * k as f64, 0.0]))
 ///     .collect();
 /// let outs = run_ensemble(&rattle, &starts, Stop::Time(1.0), 10);
-/// assert!(outs.iter().all(|o| o.error.is_none() && o.trajectory.states.len() == 3));
+/// assert!(outs.iter().all(|o| o.error.is_none() && o.trajectory.len() == 3));
 /// ```
 pub fn run_ensemble<S, B>(
     template: &Integrator<S, B>,

@@ -6,7 +6,7 @@
 //! let z0 = rattle.project_to_hidden(&State::from_slices(&[0.6, -0.8], &[0.8, 0.6])).unwrap();
 //! let out = rattle.run(z0, Stop::Time(1.0)).stride(10).execute();
 //! assert!(out.error.is_none());
-//! assert_eq!(out.trajectory.states.len(), 11);
+//! assert_eq!(out.trajectory.len(), 11);
 //! ```
 
 use crate::base_map::BaseMap;
@@ -19,6 +19,7 @@ use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
 use crate::shake::{shake_step, Workspace};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
+pub use crate::trajectory::Trajectory;
 
 /// Which map a step is: SHAKE S_h (onto M) or RATTLE R_h = Π ∘ S_h (onto M^H).
 ///
@@ -163,49 +164,6 @@ pub enum Stop {
     Time(f64),
 }
 
-/// The stored states of a run: `states[i]` at step `steps[i]`, time
-/// `times[i]`, with `diagnostics[i]` when diagnostics are on.
-///
-/// ```
-/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-/// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
-/// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
-/// let traj = integ.run(z0, Stop::Steps(4)).execute().trajectory;
-/// assert_eq!(traj.steps, vec![0, 1, 2, 3, 4]);
-/// assert_eq!(traj.len(), 5);
-/// ```
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Trajectory {
-    /// Step indices of the stored states.
-    pub steps: Vec<u64>,
-    /// Their times t0 + k h.
-    pub times: Vec<f64>,
-    /// The states (on M^H for RATTLE, on M for SHAKE).
-    pub states: Vec<State>,
-    /// Diagnostics, one per state, when enabled (empty otherwise).
-    pub diagnostics: Vec<DiagnosticRecord>,
-}
-
-impl Trajectory {
-    /// Number of stored states.
-    ///
-    /// ```
-    /// assert_eq!(shake_runtime::Trajectory::default().len(), 0);
-    /// ```
-    pub fn len(&self) -> usize {
-        self.times.len()
-    }
-
-    /// True when nothing was stored.
-    ///
-    /// ```
-    /// assert!(shake_runtime::Trajectory::default().is_empty());
-    /// ```
-    pub fn is_empty(&self) -> bool {
-        self.times.is_empty()
-    }
-}
-
 /// The result of a run: the trajectory computed so far and, if the run
 /// stopped early, why. On an error the last good state is always stored.
 ///
@@ -275,6 +233,21 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     det_prev: f64,
     out_q: Vec<f64>,
     out_p: Vec<f64>,
+    /// The kick fractions of the base map when the classical path applies
+    /// (see `classical`), and whether it is used.
+    classical: Option<(f64, f64)>,
+    fast_paths: bool,
+    /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
+    /// (set by the classical step's check and by `begin`).
+    n_fresh: bool,
+    /// The last result of `step_in_place`, already checked (with ‖N‖₁
+    /// and det N there), so that the next call need not check it again.
+    checked: Vec<f64>,
+    checked_valid: bool,
+    checked_norm: f64,
+    checked_det: f64,
+    /// ‖N‖₁ at the result of the last substep.
+    last_norm: f64,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -289,6 +262,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn new(system: S, base: B, h: f64) -> Self {
         let ws = Workspace::new(&system);
+        let classical = crate::classical::classical::<S, B>(&base);
         Integrator {
             system,
             base,
@@ -305,6 +279,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             det_prev: f64::NAN,
             out_q: vec![0.0; S::DOF],
             out_p: vec![0.0; S::DOF],
+            classical,
+            fast_paths: true,
+            n_fresh: false,
+            checked: vec![0.0; 2 * S::DOF],
+            checked_valid: false,
+            checked_norm: f64::NAN,
+            checked_det: f64::NAN,
+            last_norm: f64::NAN,
         }
     }
 
@@ -373,6 +355,30 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn compensated(mut self, on: bool) -> Self {
         self.compensated = on;
+        self
+    }
+
+    /// Use the fast paths where they apply (default true): the classical
+    /// SHAKE/RATTLE step for holonomic constraints, separable H with
+    /// quadratic kinetic energy and a kick–drift–kick base map (see
+    /// [`BaseMap::kick_drift_kick`]): one equation in the positions with an
+    /// analytic Jacobian, a projection by one linear solve, and one
+    /// factorisation of N per step for the checks and the projection.
+    /// `false` takes the general path everywhere; both give the same steps
+    /// to round-off (`tests/fast_paths.rs`).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
+    /// let fast = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).step(&z0).unwrap();
+    /// let general = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
+    ///     .fast_paths(false)
+    ///     .step(&z0)
+    ///     .unwrap();
+    /// assert!(fast.distance(&general) < 1e-15);
+    /// ```
+    pub fn fast_paths(mut self, on: bool) -> Self {
+        self.fast_paths = on;
         self
     }
 
@@ -580,6 +586,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         self.reference_norm = nd.norm;
         self.det_prev = nd.det;
+        self.n_fresh = self.classical.is_some();
         Ok(())
     }
 
@@ -626,6 +633,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         step: u64,
         t: f64,
     ) -> Result<StepInfo, StepError> {
+        self.n_fresh = false;
+        if let (Some(kdk), true) = (self.classical, self.fast_paths) {
+            return self.classical_substep(q, p, h, project, step, t, kdk);
+        }
         let opts = self.options;
         // Inside a run the increment is added with Kahan's compensation
         // (its carry is kept across the run's steps).
@@ -721,6 +732,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         self.det_prev = nd.det;
+        self.last_norm = nd.norm;
         opts.check_jump(
             Stage::Shake,
             report.lambda_correction,
@@ -729,6 +741,112 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             h,
         )
         .map_err(|e| e.at(step, t))?;
+        Ok(info)
+    }
+
+    /// [`substep`](Self::substep) on the classical path (see `classical`):
+    /// SHAKE with its own Newton iteration, then one evaluation and
+    /// factorisation of N at the new q for the checks and (if `project`)
+    /// for Π, which is one linear solve.
+    #[allow(clippy::too_many_arguments)]
+    fn classical_substep(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        h: f64,
+        project: bool,
+        step: u64,
+        t: f64,
+        kdk: (f64, f64),
+    ) -> Result<StepInfo, StepError> {
+        let opts = self.options;
+        let carry = if self.compensated && self.carrying {
+            Some(self.carry.as_mut_slice())
+        } else {
+            None
+        };
+        let report = crate::classical::shake_step(
+            &self.system,
+            kdk,
+            h,
+            q,
+            p,
+            &mut self.ws,
+            &opts.newton,
+            carry,
+        )
+        .map_err(|e| e.at(step, t))?;
+        let mut info = StepInfo {
+            shake_iterations: report.iterations,
+            lambda: report.lambda,
+            ..StepInfo::default()
+        };
+        if !q.iter().chain(p.iter()).all(|x| x.is_finite()) {
+            return Err(StepError::NonFinite {
+                what: "state",
+                step,
+                t,
+            });
+        }
+        // g at the new state was the last residual of SHAKE's iteration
+        // (the state is z0 + Δ, rounded once more by the addition).
+        let residual = self.ws.g.iter().fold(0.0f64, |a, x| {
+            if x.is_nan() || x.abs() > a {
+                x.abs()
+            } else {
+                a
+            }
+        });
+        if !(residual <= opts.constraint_tolerance) {
+            return Err(StepError::NewtonNotConverged {
+                stage: Stage::Shake,
+                step,
+                t,
+                source: SolveError::NotConverged {
+                    iterations: report.iterations,
+                    residual,
+                },
+            });
+        }
+        let nd = check_nondegeneracy(&self.system, q, p, &mut self.ws);
+        info.condition = nd.condition(self.reference_norm);
+        info.det_n = nd.det;
+        if !(info.condition <= opts.max_condition) {
+            return Err(StepError::NondegeneracyLost {
+                stage: if project { Stage::Rattle } else { Stage::Shake },
+                step,
+                t,
+                condition: info.condition,
+                limit: opts.max_condition,
+            });
+        }
+        if opts.check_component
+            && self.det_prev.is_finite()
+            && nd.det.signum() != self.det_prev.signum()
+        {
+            return Err(StepError::ComponentJump {
+                step,
+                t,
+                det_before: self.det_prev,
+                det_after: nd.det,
+            });
+        }
+        self.det_prev = nd.det;
+        self.last_norm = nd.norm;
+        opts.check_jump(
+            Stage::Shake,
+            report.lambda_correction,
+            report.lambda_predicted,
+            report.lambda,
+            h,
+        )
+        .map_err(|e| e.at(step, t))?;
+        self.n_fresh = true;
+        if project {
+            // Linear in σ: one solve, no second root to jump to.
+            crate::classical::project(&self.system, q, p, &mut self.ws);
+            info.rattle_iterations = 1;
+        }
         Ok(info)
     }
 
@@ -748,7 +866,24 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn step_in_place(&mut self, z: &mut State) -> Result<StepInfo, StepError> {
         self.check_dims(z)?;
-        self.begin(z.q.as_slice(), z.p.as_slice(), 0, 0.0)?;
+        let d = S::DOF;
+        if self.fast_paths
+            && self.checked_valid
+            && S::CONSTRAINTS > 0
+            && z.q.as_slice() == &self.checked[..d]
+            && z.p.as_slice() == &self.checked[d..]
+        {
+            // The result of the last step, checked there (finite, on M,
+            // N's condition relative to the step before, which bounds the
+            // condition begin() would compute): take its N as this step's
+            // reference instead of evaluating and factorising it again.
+            self.check_h()?;
+            self.reference_norm = self.checked_norm;
+            self.det_prev = self.checked_det;
+        } else {
+            self.checked_valid = false;
+            self.begin(z.q.as_slice(), z.p.as_slice(), 0, 0.0)?;
+        }
         self.carrying = false;
         self.out_q.copy_from_slice(z.q.as_slice());
         self.out_p.copy_from_slice(z.p.as_slice());
@@ -758,6 +893,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         if res.is_ok() {
             z.q.as_mut_slice().copy_from_slice(&q);
             z.p.as_mut_slice().copy_from_slice(&p);
+            self.checked[..d].copy_from_slice(&q);
+            self.checked[d..].copy_from_slice(&p);
+            self.checked_valid = true;
+            self.checked_norm = self.last_norm;
+            self.checked_det = self.det_prev;
         }
         self.out_q = q;
         self.out_p = p;
@@ -927,7 +1067,16 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         scratch.q.as_mut_slice().copy_from_slice(q);
         scratch.p.as_mut_slice().copy_from_slice(p);
         let mut rattle_iterations = 0;
-        if self.method == Method::Rattle && !projected {
+        if self.method == Method::Rattle && !projected && self.n_fresh && self.fast_paths {
+            // The classical path: N at this q is factorised and checked.
+            crate::classical::project(
+                &self.system,
+                scratch.q.as_slice(),
+                scratch.p.as_mut_slice(),
+                &mut self.ws,
+            );
+            rattle_iterations = 1;
+        } else if self.method == Method::Rattle && !projected {
             let pr = project_hidden(
                 &self.system,
                 scratch.q.as_mut_slice(),
@@ -991,9 +1140,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         observer(k, t, scratch);
         if store {
-            traj.steps.push(k);
-            traj.times.push(t);
-            traj.states.push(scratch.clone());
+            traj.push(k, scratch.q.as_slice(), scratch.p.as_slice());
         }
         Ok(())
     }
@@ -1009,7 +1156,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 ///     .stride(5)
 ///     .start_time(1.0)
 ///     .execute();
-/// assert_eq!(out.trajectory.times, vec![1.0, 1.5, 2.0]);
+/// assert_eq!(out.trajectory.times(), vec![1.0, 1.5, 2.0]);
 /// ```
 #[must_use = "a run does nothing until `execute` is called"]
 pub struct Run<'a, S: ConstrainedSystem, B: BaseMap, F> {
@@ -1030,7 +1177,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
     /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(7)).stride(3).execute();
-    /// assert_eq!(out.trajectory.steps, vec![0, 3, 6, 7]);
+    /// assert_eq!(out.trajectory.steps(), vec![0, 3, 6, 7]);
     /// ```
     pub fn stride(mut self, k: u64) -> Self {
         self.stride = k;
@@ -1043,7 +1190,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
     /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.5);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Time(3.0)).start_time(2.0).execute();
-    /// assert_eq!(out.trajectory.times, vec![2.0, 2.5, 3.0]);
+    /// assert_eq!(out.trajectory.times(), vec![2.0, 2.5, 3.0]);
     /// ```
     pub fn start_time(mut self, t0: f64) -> Self {
         self.t0 = t0;
@@ -1159,6 +1306,18 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 }
             }
         };
+        // Exactly the states the run will store: 0, s, 2s, …, and the last
+        // (a failing run may add its last good state: the buffer grows).
+        let capacity = if store {
+            // (reserved up to 256 MB; a longer run grows the buffer)
+            let budget = (1usize << 28) / (16 * S::DOF.max(1));
+            usize::try_from(n / stride + 1 + u64::from(n % stride != 0))
+                .unwrap_or(usize::MAX)
+                .min(budget)
+        } else {
+            0
+        };
+        traj = Trajectory::new(S::DOF, t0, h, stride, capacity);
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
         let mut p: Vec<f64> = z0.p.as_slice().to_vec();
         let mut prev_q = q.clone();

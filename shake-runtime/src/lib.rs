@@ -50,6 +50,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod base_map;
+mod classical;
 pub mod compensated;
 pub mod composition;
 pub mod diagnostics;
@@ -65,6 +66,7 @@ pub mod rattle;
 mod shake;
 mod state;
 pub mod system;
+mod trajectory;
 mod unconstrained;
 
 pub use base_map::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, StormerVerlet, SymplecticEuler};

@@ -105,17 +105,34 @@ pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<()
 /// interchanges are applied only to the columns from the pivot column on,
 /// so the multipliers of L stay where they were computed and the solves
 /// interleave them with the interchanges ([`band_lu_solve`]). U gets
-/// `band.lower + band.upper` superdiagonals (the fill of pivoting); entries
-/// outside the band must be zero on entry.
+/// `band.lower + band.upper` superdiagonals (the fill of pivoting), and its
+/// diagonal is stored as reciprocals (read by the banded solves and by
+/// [`lu_det`] through the recorded band); entries outside the band must be
+/// zero on entry.
 pub(crate) fn band_lu_factor(
     a: &mut [f64],
     n: usize,
     band: Band,
     piv: &mut [usize],
 ) -> Result<(), Singular> {
+    // The chain's bands get kernels with the widths as constants (their
+    // inner loops unrolled); the band itself is found once per system.
+    match (band.lower, band.upper) {
+        (1, 1) => band_lu_factor_w(a, n, 1, 2, piv),
+        (2, 2) => band_lu_factor_w(a, n, 2, 4, piv),
+        (l, u) => band_lu_factor_w(a, n, l, l + u, piv),
+    }
+}
+
+#[inline(always)]
+fn band_lu_factor_w(
+    a: &mut [f64],
+    n: usize,
+    kl: usize,
+    kv: usize,
+    piv: &mut [usize],
+) -> Result<(), Singular> {
     debug_assert!(a.len() >= n * n && piv.len() >= n);
-    let kl = band.lower;
-    let kv = band.lower + band.upper;
     for k in 0..n {
         let last_row = (k + kl).min(n - 1);
         let last_col = (k + kv).min(n - 1);
@@ -138,6 +155,9 @@ pub(crate) fn band_lu_factor(
             }
         }
         let inv = 1.0 / a[k + k * n];
+        // Kept as its reciprocal: the solves multiply (a division on
+        // their dependency chain costs as much as the rest of a row).
+        a[k + k * n] = inv;
         for i in k + 1..=last_row {
             a[i + k * n] *= inv;
         }
@@ -155,29 +175,34 @@ pub(crate) fn band_lu_factor(
 
 /// Solves A x = b in place from the factors of [`band_lu_factor`].
 pub(crate) fn band_lu_solve(lu: &[f64], n: usize, band: Band, piv: &[usize], b: &mut [f64]) {
-    let kl = band.lower;
-    let kv = band.lower + band.upper;
+    match (band.lower, band.upper) {
+        (1, 1) => band_lu_solve_w(lu, n, 1, 2, piv, b),
+        (2, 2) => band_lu_solve_w(lu, n, 2, 4, piv, b),
+        (l, u) => band_lu_solve_w(lu, n, l, l + u, piv, b),
+    }
+}
+
+#[inline(always)]
+fn band_lu_solve_w(lu: &[f64], n: usize, kl: usize, kv: usize, piv: &[usize], b: &mut [f64]) {
     // b ← L_k⁻¹ P_k b for k = 0, 1, …
     for k in 0..n {
         let p = piv[k];
         if p != k {
             b.swap(k, p);
         }
+        // (No test for bk = 0: in a narrow band the branch costs more
+        // than the few products it would skip.)
         let bk = b[k];
-        if bk != 0.0 {
-            for i in k + 1..=(k + kl).min(n - 1) {
-                b[i] -= lu[i + k * n] * bk;
-            }
+        for i in k + 1..=(k + kl).min(n - 1) {
+            b[i] -= lu[i + k * n] * bk;
         }
     }
-    // U x = b.
+    // U x = b (U's diagonal is stored inverted).
     for j in (0..n).rev() {
-        b[j] /= lu[j + j * n];
-        let bj = b[j];
-        if bj != 0.0 {
-            for i in j.saturating_sub(kv)..j {
-                b[i] -= lu[i + j * n] * bj;
-            }
+        let bj = b[j] * lu[j + j * n];
+        b[j] = bj;
+        for i in j.saturating_sub(kv)..j {
+            b[i] -= lu[i + j * n] * bj;
         }
     }
 }
@@ -192,14 +217,28 @@ pub(crate) fn band_lu_solve_transpose(
     piv: &[usize],
     b: &mut [f64],
 ) {
-    let kl = band.lower;
-    let kv = band.lower + band.upper;
+    match (band.lower, band.upper) {
+        (1, 1) => band_lu_solve_transpose_w(lu, n, 1, 2, piv, b),
+        (2, 2) => band_lu_solve_transpose_w(lu, n, 2, 4, piv, b),
+        (l, u) => band_lu_solve_transpose_w(lu, n, l, l + u, piv, b),
+    }
+}
+
+#[inline(always)]
+fn band_lu_solve_transpose_w(
+    lu: &[f64],
+    n: usize,
+    kl: usize,
+    kv: usize,
+    piv: &[usize],
+    b: &mut [f64],
+) {
     for j in 0..n {
         let mut s = b[j];
         for i in j.saturating_sub(kv)..j {
             s -= lu[i + j * n] * b[i];
         }
-        b[j] = s / lu[j + j * n];
+        b[j] = s * lu[j + j * n];
     }
     for k in (0..n).rev() {
         let mut s = b[k];
@@ -308,9 +347,15 @@ pub(crate) fn lu_solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f
 
 /// The determinant from the factors of [`lu_factor`].
 pub(crate) fn lu_det(lu: &[f64], n: usize, piv: &[usize]) -> f64 {
+    // Banded factors keep U's diagonal inverted.
+    let banded = recorded_band(piv, n).is_some();
     let mut det = 1.0;
     for k in 0..n {
-        det *= lu[k + k * n];
+        det *= if banded {
+            1.0 / lu[k + k * n]
+        } else {
+            lu[k + k * n]
+        };
         if piv[k] != k {
             det = -det;
         }
@@ -328,6 +373,7 @@ pub(crate) fn norm1(a: &[f64], n: usize) -> f64 {
 /// An estimate of ‖A⁻¹‖₁ from the LU factors (Hager's method as refined by
 /// Higham, at most five solve pairs); `x` and `z` are scratch of length n.
 /// Exact for n = 1 and in practice within a small factor otherwise.
+#[cfg(test)]
 pub(crate) fn inverse_norm1_estimate(
     lu: &[f64],
     n: usize,
@@ -335,11 +381,36 @@ pub(crate) fn inverse_norm1_estimate(
     x: &mut [f64],
     z: &mut [f64],
 ) -> f64 {
+    let mut start = usize::MAX;
+    inverse_norm1_estimate_from(lu, n, piv, x, z, &mut start)
+}
+
+/// [`inverse_norm1_estimate`] started from the unit vector e_start instead
+/// of the uniform vector when `start < n`, and leaving in `start` the
+/// column it ended on. Along a trajectory N changes little from step to
+/// step, and the column that maximised ‖N⁻¹e_j‖₁ at the last step usually
+/// still does: the estimate then costs one solve pair instead of two or
+/// more (the test that ends Hager's iteration is the same, so the result
+/// is as good an estimate as from the uniform start).
+pub(crate) fn inverse_norm1_estimate_from(
+    lu: &[f64],
+    n: usize,
+    piv: &[usize],
+    x: &mut [f64],
+    z: &mut [f64],
+    start: &mut usize,
+) -> f64 {
     let x = &mut x[..n];
     let z = &mut z[..n];
-    x.fill(1.0 / n as f64);
-    let mut est = 0.0;
     let mut last_j = usize::MAX;
+    if *start < n {
+        x.fill(0.0);
+        x[*start] = 1.0;
+        last_j = *start;
+    } else {
+        x.fill(1.0 / n as f64);
+    }
+    let mut est = 0.0;
     for _ in 0..5 {
         lu_solve(lu, n, piv, x);
         est = x.iter().map(|v| v.abs()).sum::<f64>();
@@ -361,11 +432,13 @@ pub(crate) fn inverse_norm1_estimate(
             z[last_j]
         };
         if zmax <= ztx || j == last_j {
+            *start = if last_j == usize::MAX { j } else { last_j };
             break;
         }
         x.fill(0.0);
         x[j] = 1.0;
         last_j = j;
+        *start = j;
     }
     est
 }

@@ -30,7 +30,7 @@
 //! It converges linearly, with a ratio of the order of the Jacobian's
 //! change over the step (O(‖λ‖) = O(h)) — in practice one or two more
 //! iterations, each far cheaper. Its stopping rule
-//! ([`Monitor::update_frozen`]) keeps rule 1, and keeps iterating while the
+//! (`Monitor::update_frozen`) keeps rule 1, and keeps iterating while the
 //! updates at least quarter (fast linear contraction). Any other update
 //! made with a stale Jacobian asks the caller to refresh the Jacobian at the
 //! current iterate: a slowing contraction and rounding noise cannot be told

@@ -26,7 +26,8 @@
 
 use crate::error::{Stage, StepError};
 use crate::linalg::{
-    band_lu_factor, inverse_norm1_estimate, lu_det, lu_factor, lu_solve, norm_inf, Band, Singular,
+    band_lu_factor, inverse_norm1_estimate_from, lu_det, lu_factor, lu_solve, norm_inf, Band,
+    Singular,
 };
 use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::shake::Workspace;
@@ -293,10 +294,23 @@ pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
             norm,
             inverse_norm: f64::INFINITY,
         },
+        // m = 1: N⁻¹ is a number.
+        Ok(()) if m == 1 => NondegeneracyCheck {
+            det: ws.jac[0],
+            norm,
+            inverse_norm: 1.0 / ws.jac[0].abs(),
+        },
         Ok(()) => NondegeneracyCheck {
             det: lu_det(&ws.jac, m, &ws.piv),
             norm,
-            inverse_norm: inverse_norm1_estimate(&ws.jac, m, &ws.piv, &mut ws.s1, &mut ws.s2),
+            inverse_norm: inverse_norm1_estimate_from(
+                &ws.jac,
+                m,
+                &ws.piv,
+                &mut ws.s1,
+                &mut ws.s2,
+                &mut ws.cond_column,
+            ),
         },
     }
 }

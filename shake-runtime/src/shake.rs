@@ -122,6 +122,25 @@ pub(crate) struct Workspace {
     /// The scale of λ for difference quotients (adapted to the system on
     /// first use: the fibre flow should move z by about √ε_mach ‖z‖).
     pub(crate) lambda_scale: f64,
+    // The classical path (see `classical`).
+    /// The entries (i, k) of `JACOBIAN_PATTERN` with k < d (∂g_i/∂q_k).
+    pub(crate) cl_pattern: Vec<(usize, usize)>,
+    /// The column group (i mod groups) of each entry of `cl_pattern`.
+    pub(crate) cl_group: Vec<usize>,
+    /// −a h ∇V(q0), the first kick.
+    pub(crate) cl_kick: Vec<f64>,
+    /// The momentum increment before the last kick.
+    pub(crate) cl_u: Vec<f64>,
+    /// Scratch vector and `grad_p` output (written only by the system).
+    pub(crate) cl_v: Vec<f64>,
+    pub(crate) cl_w: Vec<f64>,
+    /// `grad_q` output (written only by the system).
+    pub(crate) cl_hq: Vec<f64>,
+    /// The round-off level of each g_i at the step's start.
+    pub(crate) cl_floor: Vec<f64>,
+    /// The column of N⁻¹ that the last condition estimate ended on (its
+    /// next start; `usize::MAX` for none).
+    pub(crate) cond_column: usize,
 }
 
 impl Workspace {
@@ -178,6 +197,23 @@ impl Workspace {
             z1_probe: vec![0.0; n],
             jv: vec![0.0; m],
             lambda_scale: 0.0,
+            cl_pattern: S::JACOBIAN_PATTERN
+                .iter()
+                .copied()
+                .filter(|&(i, k)| i < m && k < d)
+                .collect(),
+            cl_group: S::JACOBIAN_PATTERN
+                .iter()
+                .filter(|&&(i, k)| i < m && k < d)
+                .map(|&(i, _)| i % groups)
+                .collect(),
+            cl_kick: vec![0.0; d],
+            cl_u: vec![0.0; d],
+            cl_v: vec![0.0; d],
+            cl_w: vec![0.0; d],
+            cl_hq: vec![0.0; d],
+            cl_floor: vec![0.0; m],
+            cond_column: usize::MAX,
         }
     }
 }

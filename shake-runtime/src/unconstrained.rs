@@ -11,7 +11,7 @@ use crate::system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 /// use shake_runtime::examples::HarmonicOscillator;
 /// let mut integ = Integrator::new(Unconstrained(HarmonicOscillator), StormerVerlet, 0.01);
 /// let out = integ.run(State::from_slices(&[1.0], &[0.0]), Stop::Time(std::f64::consts::PI)).execute();
-/// let last = out.trajectory.states.last().unwrap();
+/// let last = out.trajectory.last().unwrap();
 /// assert!((last.q[0] + 1.0).abs() < 1e-4);
 /// ```
 #[derive(Copy, Clone, Debug, Default, PartialEq)]

@@ -99,7 +99,7 @@ fn scene<S: ConstrainedSystem + Copy, R: r::System>(
                 .run(state_of(z0), Stop::Steps(n))
                 .execute()
                 .into_result();
-            let zr = zr.map_err(|(_, e)| e)?.states.pop().ok_or("empty run")?;
+            let zr = zr.map_err(|(_, e)| e)?.last().ok_or("empty run")?;
             let mut shake = Integrator::new(sys, base, h).shake();
             let mut zs = state_of(z0);
             for _ in 0..n {

@@ -170,19 +170,18 @@ pub fn free_run(z0: &Z, h: f64, steps: u64) -> Result<FreeRun, StepError> {
     let im0 = im_zeta(z0);
     let mut run = FreeRun {
         h,
-        t: traj.times.clone(),
+        t: traj.times(),
         curve_distance: Vec::new(),
         time_error: Vec::new(),
         angle: Vec::new(),
         shake_offset: straj
-            .states
-            .iter()
-            .map(|s| (im_zeta(&arr(s)) - im0).abs())
+            .states()
+            .map(|s| (im_zeta(&arr(&s)) - im0).abs())
             .collect(),
     };
     let mut prev = 0.0;
-    for (s, &t) in traj.states.iter().zip(&traj.times) {
-        let z = arr(s);
+    for (s, t) in traj.states().zip(traj.times()) {
+        let z = arr(&s);
         let (theta, d) = exact_curve_nearest(z0, &z);
         // Unwrap: one step turns by |ω h| < π.
         let turns = ((prev - theta) / (2.0 * PI)).round();
@@ -325,14 +324,14 @@ pub fn unconstrained_midpoint_error(start: &GravityStart, h: f64, steps: u64) ->
     let out = integ.run(state(&start.z), Stop::Steps(steps)).execute();
     let z0 = start.z;
     let mut worst = 0.0f64;
-    for (s, &t) in out.trajectory.states.iter().zip(&out.trajectory.times) {
+    for (s, t) in out.trajectory.states().zip(out.trajectory.times()) {
         let exact = [
             z0[0] + z0[2] * t + 0.5 * GRAVITY[0] * t * t,
             z0[1] + z0[3] * t + 0.5 * GRAVITY[1] * t * t,
             z0[2] + GRAVITY[0] * t,
             z0[3] + GRAVITY[1] * t,
         ];
-        worst = worst.max(dist(&arr(s), &exact));
+        worst = worst.max(dist(&arr(&s), &exact));
     }
     if out.error.is_some() {
         return f64::NAN;
@@ -368,8 +367,8 @@ pub fn gravity_run(
         .map_err(|(_, e)| e)?;
     let d = &traj.diagnostics;
     Ok(GravityRun {
-        t: traj.times.clone(),
-        z: traj.states.iter().map(arr).collect(),
+        t: traj.times(),
+        z: traj.states().map(|s| arr(&s)).collect(),
         energy: d.iter().map(|x| x.energy).collect(),
         g: d.iter().map(|x| x.constraint).collect(),
         hidden: d.iter().map(|x| x.hidden_constraint).collect(),
@@ -709,13 +708,13 @@ pub fn fold_run(start: &GravityStart, h: f64, options: Options, steps: u64) -> F
         .rattle()
         .with_options(options);
     let out = integ.run(state(&start.z), Stop::Steps(steps)).execute();
-    let z: Vec<Z> = out.trajectory.states.iter().map(arr).collect();
+    let z: Vec<Z> = out.trajectory.states().map(|s| arr(&s)).collect();
     let n: Vec<f64> = z.iter().map(nondegeneracy).collect();
     let mut run = FoldRun {
         h,
         options,
         error: out.error,
-        t: out.trajectory.times.clone(),
+        t: out.trajectory.times(),
         n: n.clone(),
         off_branch: Vec::new(),
         max_step_error: 0.0,

@@ -1,0 +1,301 @@
+//! The library's cost per step against a hand-written straight-line RATTLE
+//! (the limit, `benches/support/limit.rs`), in one run:
+//!
+//!     cargo run --release --example overhead
+//!
+//! For the pendulum and chains of 4, 16 and 64 links, RATTLE over
+//! Störmer–Verlet at h = 0.01 from the same state on M^H:
+//!
+//! - `run_us`: the library's `run`, every state projected onto M^H and
+//!   shown to the driver (stride 1, nothing stored), per step;
+//! - `step_us`: the library's single `step_in_place`, per step;
+//! - `limit_us`: the hand-written RATTLE step;
+//! - `ratio` = run_us / limit_us;
+//! - `max_rel_g`: the largest |g|/ℓ² of the library's run states (and
+//!   `limit_rel_g` of the limit's), both evaluated by the limit's own code
+//!   (link vectors first, then their lengths: the generated g expands the
+//!   squares and loses digits like ε|q|², 1e-12 for 64 links), `dE`/`limit_dE` the largest energy
+//!   error of each, `dz` the largest difference between the two
+//!   trajectories after the timed number of steps.
+//!
+//! Times are the minimum over 7 repetitions after a warm-up (the machine
+//! may be shared: the ratios, taken in one run, are what to compare). Then
+//! the memory of a stored trajectory of 10⁶ pendulum states: the bytes the
+//! trajectory holds (as requested from the allocator) and the growth of the
+//! resident set, per stored state. Nothing asserts.
+
+#[path = "../benches/support/limit.rs"]
+mod limit;
+
+use limit::{limit_chain_state, LimitChain, LimitPendulum};
+use shake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Counts the bytes currently allocated (as requested).
+struct Bytes;
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+unsafe impl GlobalAlloc for Bytes {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        LIVE.fetch_add(layout.size(), Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        LIVE.fetch_add(new_size, Ordering::Relaxed);
+        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+#[global_allocator]
+static GLOBAL: Bytes = Bytes;
+
+macro_rules! chain {
+    ($name:ident, $n:literal) => {
+        constrained_system! {
+            /// A hanging chain of unit masses joined by rods of one length,
+            /// the first anchored at the origin.
+            pub struct $name {
+                parameters { length, gravity }
+                const N = $n;
+                dof q[2*N], p[2*N];
+                hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
+                constraints {
+                    link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
+                        else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
+                }
+            }
+        }
+    };
+}
+chain!(Chain4, 4);
+chain!(Chain16, 16);
+chain!(Chain64, 64);
+
+const H: f64 = 0.01;
+const REPS: usize = 7;
+
+/// Minimum over `REPS` timed calls (after one warm-up call) of `f`, in µs
+/// per step for `steps` steps.
+fn time_us(steps: u64, mut f: impl FnMut()) -> f64 {
+    f();
+    (0..REPS)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+        * 1e6
+        / steps as f64
+}
+
+struct Row {
+    run_us: f64,
+    step_us: f64,
+    limit_us: f64,
+    max_rel_g: f64,
+    limit_rel_g: f64,
+    de: f64,
+    limit_de: f64,
+    dz: f64,
+}
+
+/// The library's side: run and step timings, and the run's |g| and energy.
+fn library<S: ConstrainedSystem + Clone>(
+    sys: S,
+    z0: &State,
+    steps: u64,
+    rel_g: impl Fn(&State) -> f64,
+) -> (f64, f64, f64, f64, State) {
+    let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
+    let run_us = time_us(steps, || {
+        let out = integ
+            .run(z0.clone(), Stop::Steps(steps))
+            .store(false)
+            .execute();
+        assert!(out.error.is_none(), "{:?}", out.error);
+    });
+    let step_us = time_us(steps, || {
+        let mut z = z0.clone();
+        for _ in 0..steps {
+            integ.step_in_place(&mut z).expect("a regular step");
+        }
+        std::hint::black_box(&z);
+    });
+    // Accuracy of the same run (not timed).
+    let sys = integ.system().clone();
+    let e0 = sys.hamiltonian(z0.q.as_slice(), z0.p.as_slice());
+    let (mut max_g, mut de) = (0.0f64, 0.0f64);
+    let mut last = z0.clone();
+    let out = integ
+        .run(z0.clone(), Stop::Steps(steps))
+        .store(false)
+        .observe(|k, _, z| {
+            if k == 0 {
+                // As for the limit: the states the steps computed.
+                return;
+            }
+            max_g = max_g.max(rel_g(z));
+            de = de.max((sys.hamiltonian(z.q.as_slice(), z.p.as_slice()) - e0).abs());
+            last = z.clone();
+        })
+        .execute();
+    assert!(out.error.is_none());
+    (run_us, step_us, max_g, de, last)
+}
+
+fn pendulum(steps: u64) -> Row {
+    let (length, gravity) = (1.0, 1.0);
+    let (th, om) = (1.0f64, 0.5);
+    let q0 = [length * th.sin(), -length * th.cos()];
+    let p0 = [length * om * th.cos(), length * om * th.sin()];
+    let z0 = State::from_slices(&q0, &p0);
+    let lim = LimitPendulum { length, gravity };
+    let (run_us, step_us, max_rel_g, de, last) = library(
+        shake::models::Pendulum::new(length, gravity),
+        &z0,
+        steps,
+        |z| lim.relative_g(&[z.q[0], z.q[1]]),
+    );
+    let limit_us = time_us(steps, || {
+        let (mut q, mut p) = (q0, p0);
+        for _ in 0..steps {
+            lim.step(H, &mut q, &mut p);
+        }
+        std::hint::black_box((q, p));
+    });
+    let (mut q, mut p) = (q0, p0);
+    let e0 = lim.energy(&q, &p);
+    let (mut lg, mut lde) = (0.0f64, 0.0f64);
+    for _ in 0..steps {
+        lim.step(H, &mut q, &mut p);
+        lg = lg.max(lim.relative_g(&q));
+        lde = lde.max((lim.energy(&q, &p) - e0).abs());
+    }
+    let dz = State::from_slices(&q, &p).distance(&last);
+    Row {
+        run_us,
+        step_us,
+        limit_us,
+        max_rel_g,
+        limit_rel_g: lg,
+        de,
+        limit_de: lde,
+        dz,
+    }
+}
+
+fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Row {
+    let (length, gravity) = (1.0, 1.0);
+    let (q0, p0) = limit_chain_state(N, length);
+    let z0 = State::from_slices(&q0, &p0);
+    let mut lim = LimitChain::<N>::new(length, gravity);
+    let (run_us, step_us, max_rel_g, de, last) =
+        library(sys, &z0, steps, |z| lim.relative_g(z.q.as_slice()));
+    let (mut q, mut p) = (q0.clone(), p0.clone());
+    let limit_us = time_us(steps, || {
+        q.copy_from_slice(&q0);
+        p.copy_from_slice(&p0);
+        for _ in 0..steps {
+            lim.step(H, &mut q, &mut p);
+        }
+        std::hint::black_box((&q, &p));
+    });
+    q.copy_from_slice(&q0);
+    p.copy_from_slice(&p0);
+    let e0 = lim.energy(&q, &p);
+    let (mut lg, mut lde) = (0.0f64, 0.0f64);
+    for _ in 0..steps {
+        lim.step(H, &mut q, &mut p);
+        lg = lg.max(lim.relative_g(&q));
+        lde = lde.max((lim.energy(&q, &p) - e0).abs());
+    }
+    let dz = State::from_slices(&q, &p).distance(&last);
+    Row {
+        run_us,
+        step_us,
+        limit_us,
+        max_rel_g,
+        limit_rel_g: lg,
+        de,
+        limit_de: lde,
+        dz,
+    }
+}
+
+fn print(name: &str, r: &Row) {
+    println!(
+        "overhead system={name} run_us={:.4} step_us={:.4} limit_us={:.4} ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e}",
+        r.run_us,
+        r.step_us,
+        r.limit_us,
+        r.run_us / r.limit_us,
+        r.max_rel_g,
+        r.limit_rel_g,
+        r.de,
+        r.limit_de,
+        r.dz
+    );
+}
+
+/// Resident set size of this process, in bytes.
+fn rss() -> usize {
+    let statm = std::fs::read_to_string("/proc/self/statm").unwrap_or_default();
+    let pages: usize = statm
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    pages * 4096
+}
+
+fn memory() {
+    let n: u64 = 1_000_000;
+    let sys = shake::models::Pendulum::new(1.0, 1.0);
+    let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
+    let z0 = State::from_slices(
+        &[1f64.sin(), -1f64.cos()],
+        &[0.5 * 1f64.cos(), 0.5 * 1f64.sin()],
+    );
+    let (live0, rss0) = (LIVE.load(Ordering::Relaxed), rss());
+    let out = integ.run(z0, Stop::Steps(n - 1)).execute();
+    let (live1, rss1) = (LIVE.load(Ordering::Relaxed), rss());
+    let traj = out.into_result().expect("a regular run");
+    let len = traj.len() as f64;
+    println!(
+        "memory system=pendulum states={} state_bytes={:.1}MB bytes={:.1}MB bytes_per_state={:.1} rss_growth={:.1}MB rss_per_state={:.1}",
+        traj.len(),
+        traj.state_bytes() as f64 / 1e6,
+        (live1 - live0) as f64 / 1e6,
+        (live1 - live0) as f64 / len,
+        rss1.saturating_sub(rss0) as f64 / 1e6,
+        rss1.saturating_sub(rss0) as f64 / len,
+    );
+    drop(traj);
+}
+
+fn main() {
+    // `OVERHEAD_ONLY=chain_16` measures one system (for profiling).
+    let only = std::env::var("OVERHEAD_ONLY").ok();
+    let want = |name: &str| only.as_deref().map_or(true, |o| o == name);
+    if want("pendulum") {
+        print("pendulum", &pendulum(20_000));
+    }
+    if want("chain_4") {
+        print("chain_4", &chain::<4, _>(Chain4::new(1.0, 1.0), 10_000));
+    }
+    if want("chain_16") {
+        print("chain_16", &chain::<16, _>(Chain16::new(1.0, 1.0), 4_000));
+    }
+    if want("chain_64") {
+        print("chain_64", &chain::<64, _>(Chain64::new(1.0, 1.0), 1_000));
+    }
+    if want("memory") {
+        memory();
+    }
+}

@@ -1,0 +1,342 @@
+//! The classical case, solved the way a hand-written RATTLE solves it:
+//! holonomic constraints g(q), a separable H = ½ pᵀA p + V(q) with constant
+//! A, and a base map that is a kick–drift–kick for such H (Störmer–Verlet,
+//! symplectic Euler; [`BaseMap::kick_drift_kick`]).
+//!
+//! # SHAKE
+//!
+//! The fibre flow is the kick p ↦ p − G0ᵀλ (G0 = g_q(q0)), and the base map
+//! is explicit, so with p* = p0 − a h ∇V(q0):
+//!
+//! q1(λ) = q0 + h A (p* − G0ᵀλ),  p1 = p* − G0ᵀλ − b h ∇V(q1).
+//!
+//! Only q1 depends on λ, affinely: the equation g(q1(λ)) = 0 needs no
+//! momentum, no base-map stage, no fibre-flow call. Its Jacobian is exact
+//! and analytic, −h G(q1) A G0ᵀ (from g_z at two points and one
+//! `grad_p`, which is A·v for a quadratic T), banded like the general one
+//! (columns compressed by the predicted band, see `shake`). It is formed
+//! at λ = 0 and kept (simplified Newton), formed again only when the
+//! contraction is slow. The iteration stops on the rate it shows: with
+//! updates Δ_k contracting by θ = ‖Δ_k‖/‖Δ_{k−1}‖ < ½, the remaining error
+//! is at most θ/(1−θ)·‖Δ_k‖, and when that is below 4ε‖λ‖ the next update
+//! could not change λ (Hairer & Wanner, *Solving ODEs II*, IV.8): no
+//! confirming iteration is spent. Below 4ε‖λ‖ means below the round-off
+//! of λ itself, or below the round-off that g's own rounding puts into λ
+//! (the floor of g below, through J⁻¹, whose size the first update
+//! shows as ‖Δ₁‖/‖r(0)‖), whichever is larger. Nor is one spent once the residual is at
+//! round-off: when every |g_i(q1)| is below ε Σ_k |∂g_i/∂q_k| |q_k| (what
+//! rounding q1 in its last bit changes g_i by), no update can bring q1
+//! closer to M, and the iteration stops there. (The general path's rule still holds:
+//! an update below 4ε‖λ‖ stops it, and so does stagnation at the noise
+//! floor with a fresh Jacobian.)
+//!
+//! # Projection and checks
+//!
+//! {g_i, H} = (G A p)_i is linear in p and the fibre moves p only, so
+//! Π's equation for σ is linear: N σ = G A p with N = G A Gᵀ, which is the
+//! nondegeneracy matrix {{H,g_i},g_j} and depends on q alone. One
+//! evaluation and factorisation of N per step serves the nondegeneracy
+//! check (det N, condition estimate; O(1) for m = 1) and the projection
+//! (one solve, exact), whether the projection happens at once or only when
+//! the state is stored (q does not change between the two).
+
+use crate::base_map::BaseMap;
+use crate::compensated::kahan_add;
+use crate::error::{SolveError, Stage, StepError};
+use crate::linalg::{band_lu_factor, band_lu_solve, lu_solve, norm_inf};
+use crate::newton::NewtonOptions;
+use crate::shake::{ShakeReport, Workspace};
+use crate::system::{ConstrainedSystem, ConstraintKind};
+
+/// The kick fractions (a, b) of the base map when the classical path
+/// applies to `S`, else `None`.
+pub(crate) fn classical<S: ConstrainedSystem, B: BaseMap>(base: &B) -> Option<(f64, f64)> {
+    if S::KIND == ConstraintKind::Holonomic
+        && S::SEPARABLE
+        && S::QUADRATIC_KINETIC
+        && S::CONSTRAINTS > 0
+    {
+        base.kick_drift_kick()
+    } else {
+        None
+    }
+}
+
+/// q1(λ) and r(λ) = g(q1(λ)) for the λ in `ws.lambda`: the momentum
+/// increment before the last kick, p* − p0 − G0ᵀλ, in `ws.cl_u`
+/// (`first`: λ = 0, u = the first kick only), Δq in `ws.dz[..d]`, q1 in
+/// `ws.z1[..d]`, r in `ws.g`.
+fn residual<S: ConstrainedSystem>(sys: &S, h: f64, ws: &mut Workspace, first: bool) {
+    let d = ws.d;
+    let m = ws.m;
+    ws.cl_u.copy_from_slice(&ws.cl_kick);
+    if !first {
+        // u ← u − G0ᵀλ: the fibre flow's kick, in the system's closed form
+        // when it has one (straight-line code), else through the pattern.
+        ws.y[..d].copy_from_slice(&ws.z0[..d]);
+        if !sys.fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.cl_u) {
+            for &(i, k) in &ws.cl_pattern {
+                ws.cl_u[k] -= ws.g_z_y[i + k * m] * ws.lambda[i];
+            }
+        }
+    }
+    // p½ = p0 + u; Δq = h A p½ (grad_p is linear in p).
+    for k in 0..d {
+        ws.cl_v[k] = ws.z0[d + k] + ws.cl_u[k];
+    }
+    sys.grad_p(&ws.z0[..d], &ws.cl_v, &mut ws.cl_w);
+    for k in 0..d {
+        ws.dz[k] = h * ws.cl_w[k];
+        ws.z1[k] = ws.z0[k] + ws.dz[k];
+    }
+    sys.constraints(&ws.z1[..d], &ws.z0[d..], &mut ws.g);
+}
+
+/// The Jacobian −h G(q1) A G0ᵀ at the current q1 (`ws.z1`), within the
+/// predicted band, factorised in `ws.jac`/`ws.piv_j`.
+fn jacobian<S: ConstrainedSystem>(
+    sys: &S,
+    h: f64,
+    ws: &mut Workspace,
+    iterations: usize,
+) -> Result<(), StepError> {
+    let (d, m) = (ws.d, ws.m);
+    let band = ws.jac_band;
+    let groups = ws.groups;
+    sys.constraint_jacobian(&ws.z1[..d], &ws.z0[d..], &mut ws.g_z_1);
+    let fill = band.lower + band.upper;
+    for j in 0..m {
+        let lo = j.saturating_sub(fill);
+        let hi = (j + band.lower).min(m - 1);
+        ws.jac[lo + j * m..=hi + j * m].fill(0.0);
+    }
+    for c in 0..groups {
+        // v = −G0ᵀ s_c, s_c the indicator of the columns j ≡ c; w = h A v.
+        ws.cl_v.fill(0.0);
+        for (&(i, k), &grp) in ws.cl_pattern.iter().zip(&ws.cl_group) {
+            if grp == c {
+                ws.cl_v[k] -= ws.g_z_y[i + k * m];
+            }
+        }
+        sys.grad_p(&ws.z0[..d], &ws.cl_v, &mut ws.cl_w);
+        ws.jv.fill(0.0);
+        for &(i, k) in &ws.cl_pattern {
+            ws.jv[i] += ws.g_z_1[i + k * m] * ws.cl_w[k];
+        }
+        for i in 0..m {
+            let lo = i.saturating_sub(band.lower);
+            let j = lo + (c + groups - lo % groups) % groups;
+            if j > i + band.upper || j >= m {
+                continue;
+            }
+            ws.jac[i + j * m] = h * ws.jv[i];
+        }
+    }
+    band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
+        .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
+}
+
+/// One classical SHAKE step in place (module docs): (q, p) = z0 ∈ M
+/// becomes z1⁻, added as an increment (with Kahan's carry in runs). The
+/// final λ is in `ws.lambda`, and r = g(z1⁻) in `ws.g`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn shake_step<S: ConstrainedSystem>(
+    sys: &S,
+    (a, b): (f64, f64),
+    h: f64,
+    q: &mut [f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+    carry: Option<&mut [f64]>,
+) -> Result<ShakeReport, StepError> {
+    let (d, m) = (ws.d, ws.m);
+    ws.z0[..d].copy_from_slice(q);
+    ws.z0[d..].copy_from_slice(p);
+    ws.lambda.fill(0.0);
+    // The first kick and G0.
+    sys.grad_q(q, p, &mut ws.cl_hq);
+    for k in 0..d {
+        ws.cl_kick[k] = -(a * h) * ws.cl_hq[k];
+    }
+    sys.constraint_jacobian(q, p, &mut ws.g_z_y);
+    // The round-off level of each g_i near q0: what rounding q to its
+    // last bit changes it by, ε Σ_k |∂g_i/∂q_k| |q_k|. (Not more: the
+    // momenta come out of λ divided by h, so a residual left 4 times above
+    // this shows in p as 4 times the round-off of a converged step.)
+    ws.cl_floor.fill(0.0);
+    for &(i, k) in &ws.cl_pattern {
+        ws.cl_floor[i] += f64::EPSILON * (ws.g_z_y[i + k * m] * q[k]).abs();
+    }
+    residual(sys, h, ws, true);
+    let mut report = ShakeReport::default();
+    let mut iterations = 0;
+    let mut fresh = true;
+    let mut prev = f64::INFINITY;
+    let mut refreshed = false;
+    let mut need_jacobian = true;
+    // The round-off level of λ: the floor of g seen through J⁻¹, whose size
+    // the first update shows (‖Δ₁‖/‖r(0)‖).
+    let mut lambda_noise = 0.0;
+    let mut r_first = 0.0;
+    let not_finite =
+        |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
+    loop {
+        let r = norm_inf(&ws.g);
+        // (norm_inf skips NaN: look at every entry.)
+        if !r.is_finite() || !ws.g.iter().chain(&ws.dz[..d]).all(|x| x.is_finite()) {
+            return Err(not_finite(iterations));
+        }
+        // The residual at round-off: no update can improve this iterate.
+        if r == 0.0 || ws.g.iter().zip(&ws.cl_floor).all(|(g, f)| g.abs() <= *f) {
+            break;
+        }
+        if iterations >= opts.max_iterations {
+            return Err(StepError::from_solve(
+                Stage::Shake,
+                SolveError::NotConverged {
+                    iterations,
+                    residual: r,
+                },
+            ));
+        }
+        if iterations == 0 {
+            r_first = r;
+        }
+        if need_jacobian {
+            // At λ = 0, once the residual is seen to need it.
+            jacobian(sys, h, ws, 0)?;
+            need_jacobian = false;
+        }
+        ws.delta.copy_from_slice(&ws.g);
+        band_lu_solve(&ws.jac, m, ws.jac_band, &ws.piv_j, &mut ws.delta);
+        let (mut step, mut size) = (0.0f64, 0.0f64);
+        for (l, dl) in ws.lambda.iter_mut().zip(&ws.delta) {
+            *l -= dl;
+            step = step.max(dl.abs());
+            size = size.max(l.abs());
+        }
+        if iterations == 0 {
+            ws.lambda_first.copy_from_slice(&ws.lambda);
+        }
+        iterations += 1;
+        let r0 = ws.g[0];
+        residual(sys, h, ws, false);
+        if !(step.is_finite() && size.is_finite()) {
+            return Err(not_finite(iterations));
+        }
+        if m == 1 && iterations == 1 && ws.lambda[0] != 0.0 {
+            // One constraint: r(λ) along the line q1(λ) is a quadratic
+            // r0 + r1 λ + r2 λ² when g is (a distance constraint), with
+            // r1 = J(0) and r2 = r(λ1)/λ1² from the first iterate λ1. Its
+            // small root, in the form without cancellation, is then exact;
+            // for any other g it is a better iterate than λ1 and the
+            // iteration goes on from it. Either way the residual decides.
+            // (The factorised 1×1 Jacobian holds 1/J(0).)
+            let (l1, r1) = (ws.lambda[0], 1.0 / ws.jac[0]);
+            let r2 = ws.g[0] / (l1 * l1);
+            let disc = r1 * r1 - 4.0 * r0 * r2;
+            if disc >= 0.0 && r1 != 0.0 {
+                let root = 2.0 * r0 / (-r1 - r1.signum() * disc.sqrt());
+                if root.is_finite() {
+                    ws.lambda[0] = root;
+                    residual(sys, h, ws, false);
+                    iterations += 1;
+                    prev = (root - l1).abs();
+                    fresh = false;
+                    continue;
+                }
+            }
+        }
+        if iterations == 1 {
+            lambda_noise = step / r_first * norm_inf(&ws.cl_floor);
+        }
+        let tol = (opts.step_tolerance * size).max(lambda_noise);
+        let theta = step / prev;
+        prev = step;
+        // An update at round-off; or a contraction that proves the next
+        // one would be (the remaining error of a linear iteration with
+        // ratio θ is at most θ/(1−θ) times the last update).
+        if step <= tol || (iterations > 1 && theta < 0.5 && theta / (1.0 - theta) * step <= tol) {
+            break;
+        }
+        // The noise floor, seen with a Jacobian of this iterate (or after
+        // one has already brought the updates there).
+        if theta > 0.5 && step <= opts.stagnation_threshold * size.max(1.0) && (fresh || refreshed)
+        {
+            break;
+        }
+        fresh = false;
+        if theta > 0.25 {
+            // Slow for the simplified iteration: a Jacobian at this iterate.
+            jacobian(sys, h, ws, iterations)?;
+            fresh = true;
+            refreshed |= step <= opts.stagnation_threshold * size.max(1.0);
+        }
+    }
+    // p1 − p0 = u − b h ∇V(q1), each part a small quantity.
+    if b != 0.0 {
+        sys.grad_q(&ws.z1[..d], &ws.z0[d..], &mut ws.cl_hq);
+    }
+    for k in 0..d {
+        ws.dz[d + k] = if b != 0.0 {
+            ws.cl_u[k] - (b * h) * ws.cl_hq[k]
+        } else {
+            ws.cl_u[k]
+        };
+    }
+    match carry {
+        Some(c) => {
+            let (cq, cp) = c.split_at_mut(d);
+            for k in 0..d {
+                kahan_add(&mut q[k], &mut cq[k], ws.dz[k]);
+                kahan_add(&mut p[k], &mut cp[k], ws.dz[d + k]);
+            }
+        }
+        None => {
+            for k in 0..d {
+                q[k] += ws.dz[k];
+                p[k] += ws.dz[d + k];
+            }
+        }
+    }
+    report.iterations = iterations;
+    report.lambda = norm_inf(&ws.lambda);
+    if iterations > 0 {
+        report.lambda_predicted = norm_inf(&ws.lambda_first);
+        report.lambda_correction = ws
+            .lambda
+            .iter()
+            .zip(&ws.lambda_first)
+            .fold(0.0f64, |e, (x, y)| e.max((x - y).abs()));
+    }
+    Ok(report)
+}
+
+/// Π in the classical case: one solve N σ = {g, H}(q, p) with the factors
+/// of N at this q already in `ws.jac`/`ws.piv` (from the step's
+/// nondegeneracy check), then the kick p ← p − G(q)ᵀσ. Returns ‖σ‖∞.
+pub(crate) fn project<S: ConstrainedSystem>(
+    sys: &S,
+    q: &[f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+) -> f64 {
+    let m = ws.m;
+    sys.hidden_constraints(q, p, &mut ws.hidden);
+    ws.sigma.copy_from_slice(&ws.hidden);
+    if m == 1 {
+        ws.sigma[0] /= ws.jac[0];
+    } else {
+        lu_solve(&ws.jac, m, &ws.piv, &mut ws.sigma);
+    }
+    // The kick, through the system's closed form when it has one.
+    ws.cl_v[..q.len()].copy_from_slice(q);
+    if !sys.fibre_flow(&ws.sigma, &mut ws.cl_v, p) {
+        sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+        for &(i, k) in &ws.cl_pattern {
+            p[k] -= ws.g_z_1[i + k * m] * ws.sigma[i];
+        }
+    }
+    norm_inf(&ws.sigma)
+}

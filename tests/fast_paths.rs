@@ -1,0 +1,269 @@
+//! Each fast path takes the same steps as the general path, to round-off
+//! (no timing here; `examples/overhead.rs` times them):
+//!
+//! - the classical SHAKE/RATTLE step (holonomic g, separable H with
+//!   quadratic T, Störmer–Verlet or symplectic Euler: Newton on the
+//!   positions alone with the analytic Jacobian, the closed-form root for
+//!   one constraint, the projection by one solve with the factors of the
+//!   step's nondegeneracy check) against `fast_paths(false)` (difference-
+//!   quotient Jacobian of the full residual, Newton projection);
+//! - explicit Störmer–Verlet against the generalised (implicit)
+//!   Störmer–Verlet of the same H declared non-separable, whose stage
+//!   equations are solved by Newton;
+//! - a lazily projected run (stored states projected with the factors of N
+//!   the step already made) against the general run.
+
+use shake::{
+    BaseMap, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, State, Stop,
+    StormerVerlet, SymplecticEuler,
+};
+
+const EPS: f64 = f64::EPSILON;
+
+/// Two solutions of the same equations to round-off. SHAKE's λ is found
+/// from g(q1(λ)) = 0 to g's round-off; the generated g of a distance
+/// constraint is a polynomial in q whose terms are of size |q|² (the
+/// squares are expanded), so that round-off is ε|q|², and the momenta
+/// inherit λ's error through p½ = (q1 − q0)/h: they agree to about
+/// ε|q|²/h, the positions to ε|q|².
+fn tolerance(z: &State, h: f64) -> f64 {
+    let scale = z.q.amax().max(z.p.amax()).max(1.0);
+    8.0 * EPS * scale * scale / h.abs().min(1.0)
+}
+
+fn pendulum_start() -> State {
+    State::from_slices(&[0.8, -0.6], &[0.9, 1.2])
+}
+
+fn chain_start() -> State {
+    let (mut q, mut p) = (vec![0.0; 16], vec![0.0; 16]);
+    let (mut x, mut y, mut vx, mut vy) = (0.0, 0.0, 0.0, 0.0);
+    for k in 0..8 {
+        let (th, om) = (
+            0.3 + 0.7 * (1.3 * k as f64).sin(),
+            0.5 * (0.9 * k as f64).cos(),
+        );
+        x += th.sin();
+        y -= th.cos();
+        vx += om * th.cos();
+        vy += om * th.sin();
+        q[2 * k] = x;
+        q[2 * k + 1] = y;
+        p[2 * k] = vx;
+        p[2 * k + 1] = vy;
+    }
+    State::from_slices(&q, &p)
+}
+
+/// From each state of a fast trajectory, one step each way; the worst
+/// difference over the tolerance.
+fn compare_steps<S: ConstrainedSystem + Clone, B: BaseMap, T: ConstrainedSystem + Clone>(
+    fast: S,
+    general: T,
+    general_fast_paths: bool,
+    base: B,
+    rattle: bool,
+    z0: &State,
+    h: f64,
+) -> f64 {
+    let f = Integrator::new(fast, base, h);
+    let mut f = if rattle { f.rattle() } else { f.shake() };
+    let g = Integrator::new(general, base, h).fast_paths(general_fast_paths);
+    let mut g = if rattle { g.rattle() } else { g.shake() };
+    let mut z = f.project_to_hidden(z0).unwrap();
+    let mut worst = 0.0f64;
+    for _ in 0..200 {
+        let zg = g.step(&z).unwrap();
+        f.step_in_place(&mut z).unwrap();
+        worst = worst.max(zg.distance(&z) / tolerance(&z, h));
+    }
+    worst
+}
+
+#[test]
+fn the_classical_step_is_the_general_step() {
+    let pend = shake::models::Pendulum::new(1.0, 9.81);
+    let chain = shake::models::Chain8::new(1.0, 1.0);
+    for rattle in [false, true] {
+        for h in [0.01, 0.05] {
+            let cases = [
+                (
+                    "pendulum SV",
+                    compare_steps(
+                        pend,
+                        pend,
+                        false,
+                        StormerVerlet,
+                        rattle,
+                        &pendulum_start(),
+                        h,
+                    ),
+                ),
+                (
+                    "pendulum Euler",
+                    compare_steps(
+                        pend,
+                        pend,
+                        false,
+                        SymplecticEuler,
+                        rattle,
+                        &pendulum_start(),
+                        h,
+                    ),
+                ),
+                (
+                    "chain SV",
+                    compare_steps(
+                        chain,
+                        chain,
+                        false,
+                        StormerVerlet,
+                        rattle,
+                        &chain_start(),
+                        h,
+                    ),
+                ),
+                (
+                    "chain Euler",
+                    compare_steps(
+                        chain,
+                        chain,
+                        false,
+                        SymplecticEuler,
+                        rattle,
+                        &chain_start(),
+                        h,
+                    ),
+                ),
+            ];
+            for (name, worst) in cases {
+                println!("{name}, rattle {rattle}, h {h}: worst / tolerance {worst:.3}");
+                assert!(worst <= 1.0, "{name}, rattle {rattle}, h {h}: {worst}");
+            }
+        }
+    }
+}
+
+/// The same system declared non-separable: Störmer–Verlet becomes the
+/// generalised method whose stage equations Newton solves (and the
+/// classical path does not apply).
+#[derive(Copy, Clone, Debug)]
+struct NonSeparable<S>(S);
+
+impl<S: Hamiltonian> Hamiltonian for NonSeparable<S> {
+    const DOF: usize = S::DOF;
+    const SEPARABLE: bool = false;
+    const QUADRATIC_KINETIC: bool = false;
+    fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
+        self.0.hamiltonian(q, p)
+    }
+    fn grad_q(&self, q: &[f64], p: &[f64], h_q: &mut [f64]) {
+        self.0.grad_q(q, p, h_q)
+    }
+    fn grad_p(&self, q: &[f64], p: &[f64], h_p: &mut [f64]) {
+        self.0.grad_p(q, p, h_p)
+    }
+    fn hessian(&self, q: &[f64], p: &[f64], h_zz: &mut [f64]) {
+        self.0.hessian(q, p, h_zz)
+    }
+}
+
+impl<S: ConstrainedSystem> ConstrainedSystem for NonSeparable<S> {
+    const CONSTRAINTS: usize = S::CONSTRAINTS;
+    const KIND: ConstraintKind = S::KIND;
+    const JACOBIAN_PATTERN: &'static [(usize, usize)] = S::JACOBIAN_PATTERN;
+    const CONSTRAINT_NAMES: &'static [&'static str] = S::CONSTRAINT_NAMES;
+    fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
+        self.0.constraints(q, p, g)
+    }
+    fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]) {
+        self.0.constraint_jacobian(q, p, g_z)
+    }
+    fn constraint_hessian(&self, q: &[f64], p: &[f64], l: &[f64], out: &mut [f64]) {
+        self.0.constraint_hessian(q, p, l, out)
+    }
+    fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
+        self.0.hidden_constraints(q, p, out)
+    }
+    fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
+        self.0.hidden_constraint_jacobian(q, p, out)
+    }
+    fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]) {
+        self.0.nondegeneracy_matrix(q, p, n)
+    }
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+        self.0.fibre_flow(lambda, q, p)
+    }
+}
+
+#[test]
+fn explicit_stormer_verlet_is_the_generalised_method() {
+    let pend = shake::models::Pendulum::new(1.0, 9.81);
+    let chain = shake::models::Chain8::new(1.0, 1.0);
+    for rattle in [false, true] {
+        let cases = [
+            (
+                "pendulum",
+                compare_steps(
+                    pend,
+                    NonSeparable(pend),
+                    true,
+                    StormerVerlet,
+                    rattle,
+                    &pendulum_start(),
+                    0.01,
+                ),
+            ),
+            (
+                "chain",
+                compare_steps(
+                    chain,
+                    NonSeparable(chain),
+                    true,
+                    StormerVerlet,
+                    rattle,
+                    &chain_start(),
+                    0.01,
+                ),
+            ),
+        ];
+        for (name, worst) in cases {
+            println!(
+                "{name} explicit vs generalised SV, rattle {rattle}: worst / tolerance {worst:.3}"
+            );
+            assert!(worst <= 1.0, "{name}, rattle {rattle}: {worst}");
+        }
+    }
+}
+
+#[test]
+fn a_lazily_projected_run_is_the_general_run() {
+    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let h = 0.01;
+    for stride in [1, 7] {
+        let mut fast = Integrator::new(chain, StormerVerlet, h).rattle();
+        let mut general = Integrator::new(chain, StormerVerlet, h)
+            .rattle()
+            .fast_paths(false);
+        let z0 = fast.project_to_hidden(&chain_start()).unwrap();
+        let a = fast
+            .run(z0.clone(), Stop::Steps(300))
+            .stride(stride)
+            .execute();
+        let b = general.run(z0, Stop::Steps(300)).stride(stride).execute();
+        let (a, b) = (a.into_result().unwrap(), b.into_result().unwrap());
+        assert_eq!(a.steps(), b.steps());
+        // Over 300 steps round-off differences grow with the flow's
+        // sensitivity (the chain is chaotic): compare per stored state
+        // with a bound that grows linearly in the step count.
+        for i in 0..a.len() {
+            let (za, zb) = (a.state(i), b.state(i));
+            let bound = tolerance(&za, h) * (1.0 + a.step(i) as f64);
+            assert!(
+                za.distance(&zb) <= bound,
+                "stride {stride}, state {i}: {:e}",
+                za.distance(&zb)
+            );
+        }
+    }
+}
