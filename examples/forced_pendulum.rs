@@ -80,16 +80,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let wrap = |a: f64| a.rem_euclid(std::f64::consts::TAU);
         println!(
             "| {:4.1} | {:.3} | {:.3} |",
-            shaken.2.states[k].q[0],
-            wrap(angle(&shaken.0, &shaken.2.states[k])),
-            wrap(angle(&still.0, &still.2.states[k])),
+            shaken.2.q(k)[0],
+            wrap(angle(&shaken.0, &shaken.2.state(k))),
+            wrap(angle(&still.0, &still.2.state(k))),
         );
     }
     for (name, (sys, e0, traj)) in [("shaken", shaken), ("still", still)] {
         let from_top = traj
-            .states
-            .iter()
-            .map(|z| (angle(sys, z).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI).abs())
+            .states()
+            .map(|z| {
+                (angle(sys, &z).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI).abs()
+            })
             .fold(0.0, f64::max);
         let g = traj
             .diagnostics
@@ -102,11 +103,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|d| d.hidden_constraint)
             .fold(0.0, f64::max);
         let dh = traj
-            .states
-            .iter()
+            .states()
             .map(|z| (sys.hamiltonian(z.q.as_slice(), z.p.as_slice()) - e0).abs())
             .fold(0.0, f64::max);
-        let work = -traj.states.last().unwrap().p[0] - (-traj.states[0].p[0]);
+        let work = -traj.p(traj.len() - 1)[0] - (-traj.p(0)[0]);
         println!(
             "\n{name} pivot: largest distance from upright {from_top:.3} rad; \
              max |g| {g:.1e}, max |{{g,H̃}}| {hidden:.1e}, max |H̃ − H̃(0)| {dh:.1e}; \

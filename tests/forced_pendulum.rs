@@ -97,7 +97,7 @@ fn rattle<B: BaseMap>(base: B, h: f64) -> ([f64; 4], State) {
         .into_result()
         .map_err(|(_, e)| e)
         .expect("the run reaches T");
-    let z = traj.states.last().unwrap().clone();
+    let z = traj.last().unwrap();
     ([z.q[1], z.q[2], z.p[1], z.p[2]], z)
 }
 
@@ -187,8 +187,7 @@ fn extended_hamiltonian_is_conserved_to_order_2() {
             .map_err(|(_, e)| e)
             .unwrap();
         let dev = traj
-            .states
-            .iter()
+            .states()
             .map(|z| (sys.hamiltonian(z.q.as_slice(), z.p.as_slice()) - e0).abs())
             .fold(0.0, f64::max);
         worst.push(dev);
