@@ -161,8 +161,13 @@ fn run(a: &Args, world: &impl Communicator) -> ExitCode {
         }
     }
     println!(
-        "computed={} resumed={} pending={} seconds={:.3} steps_per_member={}",
-        s.computed, s.resumed, s.pending, s.seconds, a.steps
+        "computed={} resumed={} pending={} seconds={:.3} steps_per_member={} gathered_bytes_per_member={:.1}",
+        s.computed,
+        s.resumed,
+        s.pending,
+        s.seconds,
+        a.steps,
+        8.0 * s.words as f64 / s.computed.max(1) as f64
     );
     println!("{s}");
     code

@@ -111,7 +111,7 @@ impl Default for MpiEnsemble {
 /// ```
 /// use shake_runtime::ensemble_mpi::EnsembleSummary;
 /// let s = EnsembleSummary { members: 10, ok: 9, failed: 1, computed: 10, resumed: 0,
-///     pending: 0, ranks: 2, threads: 1, seconds: 0.5 };
+///     pending: 0, ranks: 2, threads: 1, seconds: 0.5, words: 190 };
 /// assert_eq!(s.members_per_second(), 20.0);
 /// assert!(s.to_string().starts_with("ensemble members=10 ok=9 failed=1 ranks=2 threads=1"));
 /// ```
@@ -136,6 +136,9 @@ pub struct EnsembleSummary {
     pub threads: usize,
     /// Wall time of this job's batches (compute, gather and store), s.
     pub seconds: f64,
+    /// Words (8 bytes) gathered on rank 0 by this job: the communication
+    /// volume, all ranks' records together.
+    pub words: u64,
 }
 
 impl EnsembleSummary {
@@ -304,6 +307,7 @@ where
 
     let start = Instant::now();
     let mut computed = 0;
+    let mut gathered = 0;
     for (b, batch) in pending.chunks(options.batch).enumerate() {
         if options.max_batches.is_some_and(|m| b >= m) {
             break;
@@ -336,6 +340,7 @@ where
         if total > Count::MAX as u64 {
             return Err(MpiEnsembleError::BatchTooLarge { words: total });
         }
+        gathered += total;
         let mut status = [0u64];
         if rank == 0 {
             let counts: Vec<Count> = counts.iter().map(|&c| c as Count).collect();
@@ -401,6 +406,7 @@ where
         ranks,
         threads: rayon::current_num_threads(),
         seconds: start.elapsed().as_secs_f64(),
+        words: gathered,
     };
     Ok(Some(MpiEnsembleResults { summary, outcomes }))
 }
