@@ -152,7 +152,7 @@ pub enum RecordError {
 /// bit for bit the outcome, NaN payloads and signed zeros included).
 ///
 /// Layout: tag, member, record length, d, n stored states, n diagnostics;
-/// steps[n]; times[n]; the n states (q then p, 2d words each); the
+/// the n steps; the n times; the n states (q then p, 2d words each); the
 /// diagnostics (10 words each); the error (a variant code, 0 for none, and
 /// its fields; message strings as a byte count and the bytes). This is the
 /// one place that knows how a [`RunOutcome`] is laid out in memory.

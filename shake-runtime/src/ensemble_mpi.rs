@@ -15,7 +15,7 @@
 //!   outcome is bit for bit the same whatever the number of ranks, threads
 //!   or the batch it fell into.
 //! - **Gather.** Each rank packs its outcomes
-//!   ([`pack_outcome`](crate::ensemble::pack_outcome): u64 words, floats as
+//!   ([`pack_outcome`]: u64 words, floats as
 //!   their bits, the error with its step and time, the partial trajectory of
 //!   a failed member) and rank 0 gathers them with one `MPI_Gatherv` per
 //!   batch. Only rank 0 gets the results.

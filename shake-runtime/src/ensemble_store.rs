@@ -5,7 +5,7 @@
 //! node failure). An [`EnsembleStore`] is a directory with two files:
 //!
 //! - `results.bin`: the outcomes, one record per member in the format of
-//!   [`pack_outcome`](crate::ensemble::pack_outcome) (little-endian u64
+//!   [`pack_outcome`] (little-endian u64
 //!   words; floats as their IEEE bits, so an outcome read back is bit for bit
 //!   the one computed);
 //! - `manifest.txt`: a header line naming the job, then one line per finished

@@ -83,7 +83,7 @@ pub use integrator::{Integrator, Method, Options, Run, RunOutcome, StepInfo, Sto
 pub use mpi;
 pub use nalgebra;
 pub use newton::NewtonOptions;
-/// Re-exported for [`ensemble`]: its thread pools.
+/// Re-exported for [`ensemble()`]: its thread pools.
 pub use rayon;
 pub use state::State;
 pub use system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
