@@ -54,8 +54,12 @@ const HEADER: &str = "# shake ensemble manifest v1";
 ///
 /// ```
 /// use shake_runtime::ensemble_store::{EnsembleStore, StoreError};
-/// let e = EnsembleStore::open(std::path::Path::new("/proc/no/such/dir"), 1, "job");
+/// // A directory inside a file cannot be created.
+/// let file = std::env::temp_dir().join(format!("shake-store-doc0-{}", std::process::id()));
+/// std::fs::write(&file, b"").unwrap();
+/// let e = EnsembleStore::open(&file.join("store"), 1, "job");
 /// assert!(matches!(e, Err(StoreError::Io { .. })));
+/// std::fs::remove_file(&file).unwrap();
 /// ```
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
