@@ -15,8 +15,14 @@ for round in 1 2 3; do
     set -- $cfg
     extra=()
     if [ "${3:-}" = store ]; then rm -rf "$store/s"; extra=(--store "$store/s"); fi
-    line=$(mpirun -n "$1" --oversubscribe "$exe" "${args[@]}" --threads "$2" "${extra[@]}" | tail -1)
-    echo "round=$round ${3:-memory} $line"
+    # CPU time (user + sys of mpirun and its ranks, MPI start-up included)
+    # alongside the wall-clock rate: under a shared machine's load the
+    # former still gives the per-member cost.
+    TIMEFORMAT='%U %S %R'
+    { time mpirun -n "$1" --oversubscribe "$exe" "${args[@]}" --threads "$2" "${extra[@]}" \
+        | tail -1 > "$store/line"; } 2> "$store/time"
+    read -r user sys wall < "$store/time"
+    echo "round=$round ${3:-memory} $(cat "$store/line") cpu_s=$(awk "BEGIN{print $user + $sys}") wall_s=$wall"
   done
 done
 echo "load after: $(uptime)"
