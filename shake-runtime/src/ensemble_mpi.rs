@@ -142,11 +142,16 @@ pub struct EnsembleSummary {
 }
 
 impl EnsembleSummary {
-    /// Members computed by this job per second of wall time.
+    /// Members computed by this job per second of wall time (0 when it
+    /// computed none: everything was resumed).
     ///
     /// See [`EnsembleSummary`].
     pub fn members_per_second(&self) -> f64 {
-        self.computed as f64 / self.seconds
+        if self.computed == 0 {
+            0.0
+        } else {
+            self.computed as f64 / self.seconds
+        }
     }
 }
 
@@ -221,6 +226,11 @@ pub enum MpiEnsembleError {
 /// the other ranks `None`.
 ///
 /// Collective: every rank of `comm` must call it with the same arguments.
+///
+/// # Panics
+///
+/// If the ranks pass different numbers of initial states (a programming
+/// error: the job could not be consistent).
 ///
 /// ```no_run
 /// # use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
@@ -357,7 +367,7 @@ where
                 &words[..],
                 &mut PartitionMut::new(&mut all[..], &counts[..], &displs[..]),
             );
-            let done = receive(&all, &counts, &displs).and_then(|mut got| {
+            let done = receive(members, &all, &counts, &displs).and_then(|mut got| {
                 got.sort_by_key(|(k, _)| *k);
                 if let Some(s) = store.as_mut() {
                     let refs: Vec<_> = got.iter().map(|(k, o)| (*k, o)).collect();
@@ -413,6 +423,7 @@ where
 
 /// Unpacks the records rank r sent in `all[displs[r]..][..counts[r]]`.
 fn receive(
+    members: usize,
     all: &[u64],
     counts: &[Count],
     displs: &[Count],
@@ -423,6 +434,15 @@ fn receive(
         while !part.is_empty() {
             let (k, out, used) = unpack_outcome(part)
                 .map_err(|source| MpiEnsembleError::Record { rank: r, source })?;
+            if k >= members {
+                return Err(MpiEnsembleError::Record {
+                    rank: r,
+                    source: RecordError::Corrupted {
+                        what: "member",
+                        value: k as u64,
+                    },
+                });
+            }
             got.push((k, out));
             part = &part[used..];
         }
