@@ -99,3 +99,594 @@ where
         integ.run(z0.clone(), stop).stride(stride).execute()
     })
 }
+
+// ---------------------------------------------------------------------------
+// One member's outcome as flat words: what crosses a process boundary (an MPI
+// gather, a results file) for the distributed ensembles of `ensemble_mpi`
+// and the resumable store of `ensemble_store`.
+
+use crate::diagnostics::DiagnosticRecord;
+use crate::error::{SolveError, Stage, StepError};
+use crate::integrator::Trajectory;
+
+/// The first word of every packed record ("SHAKE", version 1).
+const RECORD_TAG: u64 = 0x5348_414b_4501;
+/// Words of one packed [`DiagnosticRecord`].
+const DIAGNOSTIC_WORDS: usize = 10;
+
+/// Why a packed record could not be read back (a truncated or corrupted
+/// buffer or file; a record written by this crate always reads back).
+///
+/// ```
+/// use shake_runtime::ensemble::{unpack_outcome, RecordError};
+/// assert!(matches!(unpack_outcome(&[1, 2, 3]), Err(RecordError::BadTag { .. })));
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum RecordError {
+    /// The record does not start with the record tag.
+    #[error("not a packed outcome (first word {found:#x})")]
+    BadTag {
+        /// The word found instead.
+        found: u64,
+    },
+    /// The buffer ends inside the record.
+    #[error("packed outcome truncated: {needed} words needed, {available} available")]
+    Truncated {
+        /// Words the record claims or needs.
+        needed: usize,
+        /// Words there are.
+        available: usize,
+    },
+    /// A field holds a value no record can hold.
+    #[error("packed outcome corrupted: {what} = {value}")]
+    Corrupted {
+        /// Which field.
+        what: &'static str,
+        /// Its value.
+        value: u64,
+    },
+}
+
+/// Appends member `member`'s outcome to `words` as one self-delimiting
+/// record: u64 words, floats as their IEEE bits (so a record read back is
+/// bit for bit the outcome, NaN payloads and signed zeros included).
+///
+/// Layout: tag, member, record length, d, n stored states, n diagnostics;
+/// the n steps; the n times; the n states (q then p, 2d words each); the
+/// diagnostics (10 words each); the error (a variant code, 0 for none, and
+/// its fields; message strings as a byte count and the bytes). This is the
+/// one place that knows how a [`RunOutcome`] is laid out in memory.
+///
+/// ```
+/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// use shake_runtime::ensemble::{pack_outcome, unpack_outcome};
+/// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).rattle();
+/// let out = integ.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(3)).execute();
+/// let mut words = Vec::new();
+/// pack_outcome(7, &out, &mut words);
+/// let (member, back, used) = unpack_outcome(&words).unwrap();
+/// assert_eq!((member, used), (7, words.len()));
+/// assert_eq!(back, out);
+/// ```
+pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
+    let start = words.len();
+    let traj = &out.trajectory;
+    let n = traj.len();
+    let d = traj.states.first().map_or(0, |z| z.dof());
+    words.extend([
+        RECORD_TAG,
+        member as u64,
+        0, // the record length, filled in below
+        d as u64,
+        n as u64,
+        traj.diagnostics.len() as u64,
+    ]);
+    words.extend_from_slice(&traj.steps);
+    words.extend(traj.times.iter().map(|t| t.to_bits()));
+    for z in &traj.states {
+        words.extend(z.q.iter().chain(z.p.iter()).map(|x| x.to_bits()));
+    }
+    for r in &traj.diagnostics {
+        words.extend([
+            r.step,
+            r.t.to_bits(),
+            r.energy.to_bits(),
+            r.constraint.to_bits(),
+            r.hidden_constraint.to_bits(),
+            r.max_shake_iterations as u64,
+            r.max_base_iterations as u64,
+            r.rattle_iterations as u64,
+            r.max_lambda.to_bits(),
+            r.max_condition.to_bits(),
+        ]);
+    }
+    pack_error(out.error.as_ref(), words);
+    words[start + 2] = (words.len() - start) as u64;
+}
+
+/// Reads one record written by [`pack_outcome`] from the start of `words`:
+/// the member index, the outcome, and the number of words used.
+///
+/// ```
+/// use shake_runtime::{RunOutcome, Trajectory, StepError};
+/// use shake_runtime::ensemble::{pack_outcome, unpack_outcome, RecordError};
+/// let failed = RunOutcome {
+///     trajectory: Trajectory::default(),
+///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0 }),
+/// };
+/// let mut words = Vec::new();
+/// pack_outcome(3, &failed, &mut words);
+/// assert_eq!(unpack_outcome(&words).unwrap().1, failed);
+/// // Half a record is an error, not a panic.
+/// assert!(matches!(unpack_outcome(&words[..4]), Err(RecordError::Truncated { .. })));
+/// ```
+pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), RecordError> {
+    let mut r = Reader { words, at: 0 };
+    let tag = r.word()?;
+    if tag != RECORD_TAG {
+        return Err(RecordError::BadTag { found: tag });
+    }
+    let member = r.index("member")?;
+    let len = r.index("record length")?;
+    if len > words.len() {
+        return Err(RecordError::Truncated {
+            needed: len,
+            available: words.len(),
+        });
+    }
+    // From here on read only inside the record's own length.
+    let mut r = Reader {
+        words: &words[..len],
+        at: r.at,
+    };
+    let d = r.count("dof")?;
+    let n = r.count("stored states")?;
+    let n_diag = r.count("diagnostics")?;
+    if n_diag != 0 && n_diag != n {
+        return Err(RecordError::Corrupted {
+            what: "diagnostics",
+            value: n_diag as u64,
+        });
+    }
+    let steps = r.slice(n)?.to_vec();
+    let times = r.slice(n)?.iter().map(|&w| f64::from_bits(w)).collect();
+    let mut states = Vec::with_capacity(n);
+    for _ in 0..n {
+        let z: Vec<f64> = r.slice(2 * d)?.iter().map(|&w| f64::from_bits(w)).collect();
+        states.push(crate::State::from_slices(&z[..d], &z[d..]));
+    }
+    let mut diagnostics = Vec::with_capacity(n_diag);
+    for _ in 0..n_diag {
+        let w = r.slice(DIAGNOSTIC_WORDS)?;
+        let f = |i: usize| f64::from_bits(w[i]);
+        diagnostics.push(DiagnosticRecord {
+            step: w[0],
+            t: f(1),
+            energy: f(2),
+            constraint: f(3),
+            hidden_constraint: f(4),
+            max_shake_iterations: w[5] as usize,
+            max_base_iterations: w[6] as usize,
+            rattle_iterations: w[7] as usize,
+            max_lambda: f(8),
+            max_condition: f(9),
+        });
+    }
+    let error = unpack_error(&mut r)?;
+    if r.at != len {
+        return Err(RecordError::Corrupted {
+            what: "record length",
+            value: len as u64,
+        });
+    }
+    let trajectory = Trajectory {
+        steps,
+        times,
+        states,
+        diagnostics,
+    };
+    Ok((member, RunOutcome { trajectory, error }, len))
+}
+
+fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
+    let b = f64::to_bits;
+    let Some(e) = e else {
+        w.push(0);
+        return;
+    };
+    match *e {
+        StepError::InvalidInput { what, value } => {
+            w.extend([1, b(value)]);
+            pack_str(what, w);
+        }
+        StepError::NonFinite { what, step, t } => {
+            w.extend([2, step, b(t)]);
+            pack_str(what, w);
+        }
+        StepError::NewtonNotConverged {
+            stage,
+            step,
+            t,
+            source,
+        } => {
+            let (kind, iterations, residual) = match source {
+                SolveError::NotConverged {
+                    iterations,
+                    residual,
+                } => (0, iterations, residual),
+                SolveError::Singular { iterations } => (1, iterations, 0.0),
+                SolveError::NonFinite { iterations } => (2, iterations, 0.0),
+            };
+            w.extend([
+                3,
+                stage_code(stage),
+                step,
+                b(t),
+                kind,
+                iterations as u64,
+                b(residual),
+            ]);
+        }
+        StepError::NondegeneracyLost {
+            stage,
+            step,
+            t,
+            condition,
+            limit,
+        } => w.extend([4, stage_code(stage), step, b(t), b(condition), b(limit)]),
+        StepError::ComponentJump {
+            step,
+            t,
+            det_before,
+            det_after,
+        } => w.extend([5, step, b(t), b(det_before), b(det_after)]),
+        StepError::FibreJump {
+            stage,
+            step,
+            t,
+            lambda,
+            predicted,
+        } => w.extend([6, stage_code(stage), step, b(t), b(lambda), b(predicted)]),
+        StepError::NotOnConstraint {
+            step,
+            t,
+            residual,
+            tolerance,
+        } => w.extend([7, step, b(t), b(residual), b(tolerance)]),
+    }
+}
+
+fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
+    let e = match r.word()? {
+        0 => return Ok(None),
+        1 => {
+            let value = r.float()?;
+            StepError::InvalidInput {
+                what: r.string()?,
+                value,
+            }
+        }
+        2 => {
+            let (step, t) = (r.word()?, r.float()?);
+            StepError::NonFinite {
+                what: r.string()?,
+                step,
+                t,
+            }
+        }
+        3 => {
+            let (stage, step, t) = (r.stage()?, r.word()?, r.float()?);
+            let (kind, iterations, residual) = (r.word()?, r.index("iterations")?, r.float()?);
+            let source = match kind {
+                0 => SolveError::NotConverged {
+                    iterations,
+                    residual,
+                },
+                1 => SolveError::Singular { iterations },
+                2 => SolveError::NonFinite { iterations },
+                k => {
+                    return Err(RecordError::Corrupted {
+                        what: "solve error",
+                        value: k,
+                    })
+                }
+            };
+            StepError::NewtonNotConverged {
+                stage,
+                step,
+                t,
+                source,
+            }
+        }
+        4 => StepError::NondegeneracyLost {
+            stage: r.stage()?,
+            step: r.word()?,
+            t: r.float()?,
+            condition: r.float()?,
+            limit: r.float()?,
+        },
+        5 => StepError::ComponentJump {
+            step: r.word()?,
+            t: r.float()?,
+            det_before: r.float()?,
+            det_after: r.float()?,
+        },
+        6 => StepError::FibreJump {
+            stage: r.stage()?,
+            step: r.word()?,
+            t: r.float()?,
+            lambda: r.float()?,
+            predicted: r.float()?,
+        },
+        7 => StepError::NotOnConstraint {
+            step: r.word()?,
+            t: r.float()?,
+            residual: r.float()?,
+            tolerance: r.float()?,
+        },
+        k => {
+            return Err(RecordError::Corrupted {
+                what: "error variant",
+                value: k,
+            })
+        }
+    };
+    Ok(Some(e))
+}
+
+const STAGES: [Stage; 5] = [
+    Stage::BaseMap,
+    Stage::Shake,
+    Stage::Rattle,
+    Stage::Fibre,
+    Stage::ProjectionOntoM,
+];
+
+fn stage_code(s: Stage) -> u64 {
+    STAGES.iter().position(|&x| x == s).unwrap_or(0) as u64
+}
+
+fn pack_str(s: &str, w: &mut Vec<u64>) {
+    w.push(s.len() as u64);
+    w.extend(s.as_bytes().chunks(8).map(|c| {
+        let mut b = [0u8; 8];
+        b[..c.len()].copy_from_slice(c);
+        u64::from_le_bytes(b)
+    }));
+}
+
+/// The error messages of [`StepError`] are `&'static str`; one read back
+/// from a record is interned: leaked once per distinct text, so a job that
+/// reads a million failures of a few kinds keeps a few strings. A corrupted
+/// file cannot make this grow without bound: past 256 distinct texts the
+/// message is replaced by a fixed one.
+fn intern(s: String) -> &'static str {
+    use std::collections::HashSet;
+    use std::sync::{Mutex, OnceLock};
+    static SEEN: OnceLock<Mutex<HashSet<&'static str>>> = OnceLock::new();
+    let mut seen = SEEN
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(&known) = seen.get(s.as_str()) {
+        return known;
+    }
+    if seen.len() >= 256 {
+        return "(message not kept: too many distinct messages read back)";
+    }
+    let leaked: &'static str = Box::leak(s.into_boxed_str());
+    seen.insert(leaked);
+    leaked
+}
+
+/// A cursor over the words of one record; every read is bounds-checked.
+struct Reader<'a> {
+    words: &'a [u64],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn slice(&mut self, n: usize) -> Result<&[u64], RecordError> {
+        let end = self
+            .at
+            .checked_add(n)
+            .filter(|&e| e <= self.words.len())
+            .ok_or(RecordError::Truncated {
+                needed: self.at.saturating_add(n),
+                available: self.words.len(),
+            })?;
+        let s = &self.words[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+    fn word(&mut self) -> Result<u64, RecordError> {
+        Ok(self.slice(1)?[0])
+    }
+    fn float(&mut self) -> Result<f64, RecordError> {
+        Ok(f64::from_bits(self.word()?))
+    }
+    /// A count: no larger than the words there are (a corrupted count must
+    /// not make the reader allocate terabytes before it finds the end).
+    fn count(&mut self, what: &'static str) -> Result<usize, RecordError> {
+        let w = self.word()?;
+        usize::try_from(w)
+            .ok()
+            .filter(|&c| c <= self.words.len())
+            .ok_or(RecordError::Corrupted { what, value: w })
+    }
+    /// An index or iteration count (any value a usize holds).
+    fn index(&mut self, what: &'static str) -> Result<usize, RecordError> {
+        let w = self.word()?;
+        usize::try_from(w).map_err(|_| RecordError::Corrupted { what, value: w })
+    }
+    fn stage(&mut self) -> Result<Stage, RecordError> {
+        let w = self.word()?;
+        STAGES
+            .get(w as usize)
+            .copied()
+            .ok_or(RecordError::Corrupted {
+                what: "stage",
+                value: w,
+            })
+    }
+    fn string(&mut self) -> Result<&'static str, RecordError> {
+        let len = self.index("message length")?;
+        let bytes: Vec<u8> = self
+            .slice(len.div_ceil(8))?
+            .iter()
+            .flat_map(|w| w.to_le_bytes())
+            .take(len)
+            .collect();
+        let s = String::from_utf8(bytes).map_err(|_| RecordError::Corrupted {
+            what: "message",
+            value: len as u64,
+        })?;
+        Ok(intern(s))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::examples::Pendulum;
+    use crate::{Stop, StormerVerlet};
+
+    fn bits(k: usize, out: &RunOutcome) -> Vec<u64> {
+        let mut w = Vec::new();
+        pack_outcome(k, out, &mut w);
+        w
+    }
+
+    /// A member's outcome must not depend on which members ran before it
+    /// on the same integrator (a rayon worker or an MPI rank reuses one):
+    /// an integrator that has run another member first gives the same bits
+    /// as a fresh one. (SHAKE's difference-quotient scale used to be kept
+    /// from the first run, which changed the last bits of later ones.)
+    #[test]
+    fn a_member_does_not_depend_on_its_predecessors() {
+        let p = Pendulum::default();
+        let template = Integrator::new(p, StormerVerlet, 0.01).rattle();
+        for k in 1..8 {
+            let z = p.state(0.4 * k as f64, (k as f64).sin());
+            let fresh = template
+                .clone()
+                .run(z.clone(), Stop::Steps(200))
+                .stride(50)
+                .execute();
+            let mut reused = template.clone();
+            let _ = reused.run(p.state(0.05, 0.0), Stop::Steps(10)).execute();
+            let again = reused.run(z, Stop::Steps(200)).stride(50).execute();
+            assert_eq!(bits(k, &fresh), bits(k, &again), "member {k}");
+        }
+    }
+
+    /// Every error variant reads back as itself, after the trajectory and
+    /// diagnostics; a truncated record is an error at every cut.
+    #[test]
+    fn every_error_round_trips() {
+        let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.05)
+            .rattle()
+            .with_diagnostics();
+        let mut out = integ
+            .run(Pendulum::default().state(1.0, -0.3), Stop::Steps(9))
+            .stride(4)
+            .execute();
+        assert_eq!(out.trajectory.diagnostics.len(), 4);
+        let errors = [
+            StepError::InvalidInput {
+                what: "stride must be at least 1",
+                value: -0.0,
+            },
+            StepError::NonFinite {
+                what: "a message that is longer than eight bytes",
+                step: 3,
+                t: f64::NAN,
+            },
+            StepError::NewtonNotConverged {
+                stage: Stage::BaseMap,
+                step: u64::MAX,
+                t: 1.5,
+                source: SolveError::NotConverged {
+                    iterations: 50,
+                    residual: 1e-3,
+                },
+            },
+            StepError::NewtonNotConverged {
+                stage: Stage::Fibre,
+                step: 1,
+                t: 0.0,
+                source: SolveError::Singular { iterations: 2 },
+            },
+            StepError::NewtonNotConverged {
+                stage: Stage::ProjectionOntoM,
+                step: 1,
+                t: 0.0,
+                source: SolveError::NonFinite { iterations: 7 },
+            },
+            StepError::NondegeneracyLost {
+                stage: Stage::Rattle,
+                step: 4,
+                t: 0.2,
+                condition: f64::INFINITY,
+                limit: 1e12,
+            },
+            StepError::ComponentJump {
+                step: 5,
+                t: 0.25,
+                det_before: 1.0,
+                det_after: -2.0,
+            },
+            StepError::FibreJump {
+                stage: Stage::Shake,
+                step: 6,
+                t: 0.3,
+                lambda: 2.0,
+                predicted: 1e-3,
+            },
+            StepError::NotOnConstraint {
+                step: 0,
+                t: 0.0,
+                residual: 0.1,
+                tolerance: 1e-10,
+            },
+        ];
+        for e in errors {
+            out.error = Some(e.clone());
+            let w = bits(11, &out);
+            let (k, back, used) = unpack_outcome(&w).unwrap();
+            assert_eq!((k, used), (11, w.len()));
+            assert_eq!(bits(11, &back), w, "{e}");
+            assert_eq!(back.error.unwrap().to_string(), e.to_string());
+            for cut in 0..w.len() {
+                assert!(unpack_outcome(&w[..cut]).is_err(), "cut {cut} of {e}");
+            }
+        }
+    }
+
+    /// Records follow each other in one buffer (as in a gather).
+    #[test]
+    fn records_concatenate() {
+        let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+        let outs: Vec<_> = (0..3)
+            .map(|k| {
+                integ
+                    .run(
+                        Pendulum::default().state(0.1 * k as f64, 0.0),
+                        Stop::Steps(k),
+                    )
+                    .execute()
+            })
+            .collect();
+        let mut w = Vec::new();
+        for (k, o) in outs.iter().enumerate() {
+            pack_outcome(10 + k, o, &mut w);
+        }
+        let mut rest = &w[..];
+        for (k, o) in outs.iter().enumerate() {
+            let (member, back, used) = unpack_outcome(rest).unwrap();
+            assert_eq!((member, &back), (10 + k, o));
+            rest = &rest[used..];
+        }
+        assert!(rest.is_empty());
+    }
+}

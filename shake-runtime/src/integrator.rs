@@ -1323,6 +1323,11 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         let mut prev_q = q.clone();
         let mut prev_p = p.clone();
         let mut scratch = z0;
+        // SHAKE's difference quotients take their scale from the first state
+        // they meet: this run's, not whatever an earlier run on this
+        // integrator started from (an ensemble reuses one integrator per
+        // thread; a member's result must not depend on its neighbours).
+        integ.ws.lambda_scale = 0.0;
         if let Err(e) = integ.begin(&q, &p, 0, t0) {
             return fail(traj, e);
         }

@@ -55,6 +55,9 @@ pub mod compensated;
 pub mod composition;
 pub mod diagnostics;
 pub mod ensemble;
+#[cfg(feature = "mpi")]
+pub mod ensemble_mpi;
+pub mod ensemble_store;
 pub mod error;
 pub mod examples;
 pub mod fibre;
@@ -76,9 +79,13 @@ pub use ensemble::{ensemble, run_ensemble};
 pub use error::{SolveError, Stage, StepError};
 pub use fibre::FibreFlow;
 pub use integrator::{Integrator, Method, Options, Run, RunOutcome, StepInfo, Stop, Trajectory};
+/// The MPI bindings (rsmpi) the distributed ensembles use, for initialising
+/// MPI and naming communicators.
+#[cfg(feature = "mpi")]
+pub use mpi;
 pub use nalgebra;
 pub use newton::NewtonOptions;
-/// Re-exported for [`ensemble`]: its thread pools.
+/// Re-exported for [`ensemble()`]: its thread pools.
 pub use rayon;
 pub use state::State;
 pub use system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
