@@ -172,7 +172,7 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
     let start = words.len();
     let traj = &out.trajectory;
     let n = traj.len();
-    let d = traj.states.first().map_or(0, |z| z.dof());
+    let (d, t0, h, stride) = traj.layout();
     words.extend([
         RECORD_TAG,
         member as u64,
@@ -180,11 +180,14 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
         d as u64,
         n as u64,
         traj.diagnostics.len() as u64,
+        t0.to_bits(),
+        h.to_bits(),
+        stride,
     ]);
-    words.extend_from_slice(&traj.steps);
-    words.extend(traj.times.iter().map(|t| t.to_bits()));
-    for z in &traj.states {
-        words.extend(z.q.iter().chain(z.p.iter()).map(|x| x.to_bits()));
+    words.extend(traj.steps());
+    words.extend(traj.times().iter().map(|t| t.to_bits()));
+    for i in 0..n {
+        words.extend(traj.q(i).iter().chain(traj.p(i)).map(|x| x.to_bits()));
     }
     for r in &traj.diagnostics {
         words.extend([
@@ -248,12 +251,32 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
             value: n_diag as u64,
         });
     }
+    let t0 = f64::from_bits(r.word()?);
+    let h = f64::from_bits(r.word()?);
+    let stride = r.word()?;
     let steps = r.slice(n)?.to_vec();
-    let times = r.slice(n)?.iter().map(|&w| f64::from_bits(w)).collect();
-    let mut states = Vec::with_capacity(n);
-    for _ in 0..n {
-        let z: Vec<f64> = r.slice(2 * d)?.iter().map(|&w| f64::from_bits(w)).collect();
-        states.push(crate::State::from_slices(&z[..d], &z[d..]));
+    let times = r.slice(n)?.to_vec();
+    let mut trajectory = Trajectory::new(d, t0, h, stride, n);
+    for i in 0..n {
+        // The steps must be those a run stores (0, s, 2s, … and at most one
+        // more), or the times rebuilt from them would not be the packed ones.
+        let z = r.slice(2 * d)?;
+        let q: Vec<f64> = z[..d].iter().map(|&w| f64::from_bits(w)).collect();
+        let p: Vec<f64> = z[d..].iter().map(|&w| f64::from_bits(w)).collect();
+        let regular = steps[i] == trajectory.len() as u64 * stride.max(1);
+        if !regular && i + 1 != n {
+            return Err(RecordError::Corrupted {
+                what: "stored steps",
+                value: steps[i],
+            });
+        }
+        trajectory.push(steps[i], &q, &p);
+        if trajectory.time(i).to_bits() != times[i] {
+            return Err(RecordError::Corrupted {
+                what: "stored times",
+                value: times[i],
+            });
+        }
     }
     let mut diagnostics = Vec::with_capacity(n_diag);
     for _ in 0..n_diag {
@@ -279,12 +302,7 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
             value: len as u64,
         });
     }
-    let trajectory = Trajectory {
-        steps,
-        times,
-        states,
-        diagnostics,
-    };
+    trajectory.diagnostics = diagnostics;
     Ok((member, RunOutcome { trajectory, error }, len))
 }
 

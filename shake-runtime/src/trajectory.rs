@@ -26,7 +26,7 @@ use crate::state::State;
 /// assert_eq!(traj.q(0), &[0.0, -1.0]);
 /// assert_eq!(traj.state(0).p[0], 0.5);
 /// ```
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
     /// d: each state is 2d numbers, q then p.
     dof: usize,
@@ -43,6 +43,13 @@ pub struct Trajectory {
     pub diagnostics: Vec<DiagnosticRecord>,
 }
 
+/// No state, d = 0, t0 = 0, h = 0, stride 1 (the stride a run clamps to).
+impl Default for Trajectory {
+    fn default() -> Self {
+        Trajectory::new(0, 0.0, 0.0, 1, 0)
+    }
+}
+
 impl Trajectory {
     /// An empty trajectory of a run with d degrees of freedom, start time
     /// t0, step size h and stride s, with room for `capacity` states.
@@ -57,6 +64,13 @@ impl Trajectory {
             extra: None,
             diagnostics: Vec::new(),
         }
+    }
+
+    /// (d, t0, h, stride): what, with the stored step indices, fixes every
+    /// state's place and time (for packing a trajectory into flat words and
+    /// back).
+    pub(crate) fn layout(&self) -> (usize, f64, f64, u64) {
+        (self.dof, self.t0, self.h, self.stride)
     }
 
     /// Appends the state (q, p) at step k: the next multiple of the stride,
