@@ -63,6 +63,7 @@ pub mod newton;
 pub mod particles;
 pub mod rattle;
 mod shake;
+pub mod solver;
 mod state;
 pub mod system;
 mod unconstrained;

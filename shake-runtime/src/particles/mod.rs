@@ -24,10 +24,24 @@
 //!
 //! Momentum-dependent constraints stay on the dense path.
 
+mod cluster;
+mod error;
+pub mod generate;
+mod graph;
+mod rattle;
+mod run;
+mod state;
 mod stencil;
+pub mod stencils;
 mod system;
 mod table;
 
+#[doc(hidden)]
+pub use cluster::{ClusterArgs, ClusterFailure, ClusterReport, ClusterScratch, FamilyClusters};
+pub use error::ParticleError;
+pub use rattle::{Method, Options, Rattle, SolverChoice, StepReport};
+pub use run::{RunOutcome, RunSummary};
+pub use state::{ParticleState, Trajectory};
 pub use stencil::Stencil;
 pub use system::{ConstraintFamily, ParticleSystem, PotentialFamily};
 pub use table::{Table, TopologyError};

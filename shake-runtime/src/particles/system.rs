@@ -1,5 +1,8 @@
 //! A system of particles: masses, constraint families, potential families.
 
+use super::cluster::{
+    self, ClusterArgs, ClusterFailure, ClusterReport, ClusterScratch, FamilyClusters,
+};
 use super::{Stencil, Table, TopologyError};
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
@@ -16,6 +19,36 @@ pub trait ConstraintFamily: Send + Sync {
     /// particles into `grad` (`arity * dim` entries per member, member after
     /// member, in the layout of [`Stencil`]).
     fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]);
+    /// As [`gradients`](Self::gradients), and the squared residual scale
+    /// |∇g_k|² · extent_k² of every member into `scale2` (extent² =
+    /// Σ_a |x_a − x̄|² over the member's particles, |x_a|² for one particle):
+    /// the relative residual of member k is |g_k| / √scale2_k.
+    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]);
+    /// The position stage of RATTLE on every independent cluster of this
+    /// family (per-cluster exact Newton; monomorphic in the stencil).
+    #[doc(hidden)]
+    #[allow(clippy::too_many_arguments)]
+    fn shake_clusters(
+        &self,
+        plan: &FamilyClusters,
+        args: &ClusterArgs<'_>,
+        scratch: &mut ClusterScratch,
+        q: &mut [f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure>;
+    /// The velocity stage (projection onto M^H) on every cluster.
+    #[doc(hidden)]
+    #[allow(clippy::too_many_arguments)]
+    fn project_clusters(
+        &self,
+        plan: &FamilyClusters,
+        inv_mass: &[f64],
+        scratch: &mut ClusterScratch,
+        q: &[f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure>;
 }
 
 /// A potential family: V_fam(x) = Σ_k f(x_{i_k1}, …; c_k).
@@ -77,6 +110,58 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
                 .stencil
                 .gradient(x, self.table.data(k), &mut grad[k * w..(k + 1) * w]);
         }
+    }
+    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]) {
+        let w = S::ARITY * S::DIM;
+        let mut x = [0.0; MAX_LOCAL];
+        let x = &mut x[..w];
+        for k in 0..self.table.len() {
+            self.gather(q, k, x);
+            let gr = &mut grad[k * w..(k + 1) * w];
+            g[k] = self.stencil.gradient(x, self.table.data(k), gr);
+            let n2: f64 = gr.iter().map(|v| v * v).sum();
+            scale2[k] = (n2 * cluster::extent2::<S>(x)).max(f64::MIN_POSITIVE);
+        }
+    }
+    fn shake_clusters(
+        &self,
+        plan: &FamilyClusters,
+        args: &ClusterArgs<'_>,
+        scratch: &mut ClusterScratch,
+        q: &mut [f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure> {
+        cluster::shake_clusters(
+            &self.stencil,
+            &self.table,
+            plan,
+            args,
+            scratch,
+            q,
+            p,
+            report,
+        )
+    }
+    fn project_clusters(
+        &self,
+        plan: &FamilyClusters,
+        inv_mass: &[f64],
+        scratch: &mut ClusterScratch,
+        q: &[f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure> {
+        cluster::project_clusters(
+            &self.stencil,
+            &self.table,
+            plan,
+            inv_mass,
+            scratch,
+            q,
+            p,
+            report,
+        )
     }
 }
 

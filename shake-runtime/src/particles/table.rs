@@ -196,11 +196,7 @@ impl Table {
 
     /// The number of rows (members).
     pub fn len(&self) -> usize {
-        if self.arity == 0 {
-            0
-        } else {
-            self.particles.len() / self.arity
-        }
+        self.particles.len().checked_div(self.arity).unwrap_or(0)
     }
 
     /// True when the table has no row.
