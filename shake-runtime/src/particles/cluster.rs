@@ -58,47 +58,6 @@ impl FamilyClusters {
     }
 }
 
-/// Scratch for one cluster at a time, allocated once for the largest.
-#[derive(Clone, Debug)]
-pub struct ClusterScratch {
-    x0: Vec<f64>,
-    x: Vec<f64>,
-    pl: Vec<f64>,
-    wm: Vec<f64>,
-    gr0: Vec<f64>,
-    gr1: Vec<f64>,
-    jac: Vec<f64>,
-    g: Vec<f64>,
-    nu: Vec<f64>,
-    s2: Vec<f64>,
-    xm: Vec<f64>,
-}
-
-impl ClusterScratch {
-    pub(crate) fn new() -> Self {
-        let c = MAX_CLUSTER;
-        let x = MAX_CLUSTER_COORDS;
-        let w = super::system::MAX_LOCAL;
-        ClusterScratch {
-            x0: vec![0.0; x],
-            x: vec![0.0; x],
-            pl: vec![0.0; x],
-            wm: vec![0.0; x],
-            gr0: vec![0.0; c * w],
-            gr1: vec![0.0; c * w],
-            jac: vec![0.0; c * c],
-            g: vec![0.0; c],
-            nu: vec![0.0; c],
-            s2: vec![0.0; c],
-            xm: vec![0.0; w],
-        }
-    }
-    pub(crate) fn bytes(&self) -> usize {
-        8 * (self.x0.len() * 4 + self.gr0.len() * 2 + self.jac.len() + self.g.len() * 3)
-            + 8 * self.xm.len()
-    }
-}
-
 /// The inputs of the position stage shared by every cluster.
 #[derive(Clone, Copy, Debug)]
 pub struct ClusterArgs<'a> {
@@ -182,75 +141,88 @@ pub(crate) fn extent2<S: Stencil>(xm: &[f64]) -> f64 {
     e
 }
 
-/// Σ over particles shared by members j and l of ∇_a g_j · W_a ∇_a g_l.
+/// Σ over particles shared by members j and l of ∇_a g_j · v_a, with v the
+/// (already mass-weighted) block of member l.
 #[inline(always)]
-fn coupling<S: Stencil>(sj: &[u8], gj: &[f64], sl: &[u8], gl: &[f64], wm: &[f64]) -> f64 {
+fn coupling_w<S: Stencil>(sj: &[u8], gj: &[f64], sl: &[u8], vl: &[f64]) -> f64 {
     let d = S::DIM;
     let mut v = 0.0;
     for a in 0..S::ARITY {
         for b in 0..S::ARITY {
             if sj[a] == sl[b] {
-                let mut dot = 0.0;
                 for c in 0..d {
-                    dot += gj[a * d + c] * gl[b * d + c];
+                    v += gj[a * d + c] * vl[b * d + c];
                 }
-                v += wm[sj[a] as usize] * dot;
             }
         }
     }
     v
 }
 
-/// Solves J δ = b in place (b ← δ) for an n×n row-major J by Gaussian
-/// elimination with partial pivoting. False when a pivot is zero or not
-/// finite.
-#[inline]
-fn lu_solve(n: usize, jac: &mut [f64], b: &mut [f64]) -> bool {
+/// LU factorisation with partial pivoting of an n×n row-major matrix, in
+/// place. False when a pivot is zero or not finite.
+#[inline(always)]
+fn lu_factor(n: usize, a: &mut [f64], piv: &mut [usize], dinv: &mut [f64]) -> bool {
     for k in 0..n {
-        let mut piv = k;
-        let mut best = jac[k * n + k].abs();
+        let mut p = k;
+        let mut best = a[k * n + k].abs();
         for i in k + 1..n {
-            let v = jac[i * n + k].abs();
+            let v = a[i * n + k].abs();
             if v > best {
                 best = v;
-                piv = i;
+                p = i;
             }
         }
+        piv[k] = p;
         if !(best > 0.0 && best.is_finite()) {
             return false;
         }
-        if piv != k {
+        if p != k {
             for c in 0..n {
-                jac.swap(k * n + c, piv * n + c);
+                a.swap(k * n + c, p * n + c);
             }
-            b.swap(k, piv);
         }
-        let inv = 1.0 / jac[k * n + k];
+        let inv = 1.0 / a[k * n + k];
+        dinv[k] = inv;
         for i in k + 1..n {
-            let f = jac[i * n + k] * inv;
-            if f != 0.0 {
-                for c in k + 1..n {
-                    jac[i * n + c] -= f * jac[k * n + c];
-                }
-                b[i] -= f * b[k];
+            let f = a[i * n + k] * inv;
+            a[i * n + k] = f;
+            for c in k + 1..n {
+                a[i * n + c] -= f * a[k * n + c];
             }
+        }
+    }
+    true
+}
+
+/// b ← A⁻¹ b with the factors of [`lu_factor`] (divisions replaced by the
+/// stored inverse pivots: they sat on the critical path).
+#[inline(always)]
+fn lu_solve(n: usize, a: &[f64], piv: &[usize], dinv: &[f64], b: &mut [f64]) {
+    for k in 0..n {
+        if piv[k] != k {
+            b.swap(k, piv[k]);
+        }
+        let bk = b[k];
+        for i in k + 1..n {
+            b[i] -= a[i * n + k] * bk;
         }
     }
     for k in (0..n).rev() {
         let mut s = b[k];
         for c in k + 1..n {
-            s -= jac[k * n + c] * b[c];
+            s -= a[k * n + c] * b[c];
         }
-        b[k] = s / jac[k * n + k];
+        b[k] = s * dinv[k];
     }
-    true
 }
 
 /// Solves N μ = b in place for symmetric positive definite N (row-major,
 /// lower triangle used) by Cholesky. False when N is not numerically
 /// positive definite.
-#[inline]
+#[inline(always)]
 fn cholesky_solve(n: usize, a: &mut [f64], b: &mut [f64]) -> bool {
+    let mut dinv = [0.0; MAX_CLUSTER];
     for j in 0..n {
         let mut d = a[j * n + j];
         for k in 0..j {
@@ -262,6 +234,7 @@ fn cholesky_solve(n: usize, a: &mut [f64], b: &mut [f64]) -> bool {
         let d = d.sqrt();
         a[j * n + j] = d;
         let inv = 1.0 / d;
+        dinv[j] = inv;
         for i in j + 1..n {
             let mut s = a[i * n + j];
             for k in 0..j {
@@ -275,118 +248,275 @@ fn cholesky_solve(n: usize, a: &mut [f64], b: &mut [f64]) -> bool {
         for k in 0..i {
             s -= a[i * n + k] * b[k];
         }
-        b[i] = s / a[i * n + i];
+        b[i] = s * dinv[i];
     }
     for i in (0..n).rev() {
         let mut s = b[i];
         for k in i + 1..n {
             s -= a[k * n + i] * b[k];
         }
-        b[i] = s / a[i * n + i];
+        b[i] = s * dinv[i];
     }
     true
 }
 
-/// The position stage on every cluster of one family: on entry `q` holds
-/// q̃ = q0 + h M⁻¹ p̃ and `p` holds p̃ on the cluster's particles; on exit q1
-/// with g(q1) = 0 to the tolerance, and p½ (when `inv_h` ≠ 0).
-pub(crate) fn shake_clusters<S: Stencil>(
+const ML: usize = super::system::MAX_LOCAL;
+
+/// One cluster's local copy: coordinates, momenta, inverse masses, and the
+/// member blocks of G. Stack arrays, set up once per family per stage.
+struct Local {
+    x: [f64; MAX_CLUSTER_COORDS],
+    pl: [f64; MAX_CLUSTER_COORDS],
+    wm: [f64; MAX_CLUSTER_COORDS],
+    gr: [f64; MAX_CLUSTER * ML],
+    xm: [f64; ML],
+    n: [f64; MAX_CLUSTER * MAX_CLUSTER],
+    g: [f64; MAX_CLUSTER],
+}
+
+impl Local {
+    fn new() -> Self {
+        Local {
+            x: [0.0; MAX_CLUSTER_COORDS],
+            pl: [0.0; MAX_CLUSTER_COORDS],
+            wm: [0.0; MAX_CLUSTER_COORDS],
+            gr: [0.0; MAX_CLUSTER * ML],
+            xm: [0.0; ML],
+            n: [0.0; MAX_CLUSTER * MAX_CLUSTER],
+            g: [0.0; MAX_CLUSTER],
+        }
+    }
+
+    /// The velocity stage on the local copy: pl ← pl − G(x)ᵀ μ with
+    /// G(x) W pl = 0 (G(x) in `gr`). Returns the largest squared relative
+    /// hidden residual after projection, or None if N is not positive
+    /// definite.
+    #[inline(always)]
+    fn project<S: Stencil>(&mut self, mc: usize, slots: &[u8]) -> Option<f64> {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let wd = ar * d;
+        for j in 0..mc {
+            let sj = &slots[j * ar..(j + 1) * ar];
+            let gj = &self.gr[j * wd..(j + 1) * wd];
+            let mut r = 0.0;
+            for a in 0..ar {
+                let s = sj[a] as usize;
+                let w = self.wm[s];
+                for k in 0..d {
+                    r += w * gj[a * d + k] * self.pl[s * d + k];
+                }
+            }
+            self.g[j] = r;
+            for l in 0..=j {
+                let sl = &slots[l * ar..(l + 1) * ar];
+                let gl = &self.gr[l * wd..(l + 1) * wd];
+                let mut v = 0.0;
+                for a in 0..ar {
+                    for b in 0..ar {
+                        if sj[a] == sl[b] {
+                            let w = self.wm[sj[a] as usize];
+                            for k in 0..d {
+                                v += w * gj[a * d + k] * gl[b * d + k];
+                            }
+                        }
+                    }
+                }
+                self.n[j * mc + l] = v;
+            }
+        }
+        if !cholesky_solve(mc, &mut self.n[..mc * mc], &mut self.g[..mc]) {
+            return None;
+        }
+        for l in 0..mc {
+            let mu = self.g[l];
+            let sl = &slots[l * ar..(l + 1) * ar];
+            let gl = &self.gr[l * wd..(l + 1) * wd];
+            for a in 0..ar {
+                let s = sl[a] as usize;
+                for k in 0..d {
+                    self.pl[s * d + k] -= mu * gl[a * d + k];
+                }
+            }
+        }
+        // The hidden constraints after projection, relative to
+        // |∇g_j| · |velocity of the member's particles| (squared).
+        let mut worst = 0.0f64;
+        for j in 0..mc {
+            let sj = &slots[j * ar..(j + 1) * ar];
+            let gj = &self.gr[j * wd..(j + 1) * wd];
+            let (mut r, mut v2, mut n2) = (0.0, 0.0, 0.0);
+            for a in 0..ar {
+                let s = sj[a] as usize;
+                for k in 0..d {
+                    let v = self.wm[s] * self.pl[s * d + k];
+                    r += gj[a * d + k] * v;
+                    v2 += v * v;
+                    n2 += gj[a * d + k] * gj[a * d + k];
+                }
+            }
+            let rel = r * r / (n2 * v2).max(f64::MIN_POSITIVE);
+            if !(rel <= worst) {
+                worst = rel;
+            }
+        }
+        Some(worst)
+    }
+}
+
+/// Everything one cluster works on, on the stack, set up once per family
+/// per stage and reused cluster after cluster.
+struct Work {
+    l: Local,
+    wg0: [f64; MAX_CLUSTER * ML],
+    lu: [f64; MAX_CLUSTER * MAX_CLUSTER],
+    piv: [usize; MAX_CLUSTER],
+    dinv: [f64; MAX_CLUSTER],
+    nu: [f64; MAX_CLUSTER],
+    s2: [f64; MAX_CLUSTER],
+    x0: [f64; MAX_CLUSTER_COORDS],
+    max_rel: f64,
+    max_hidden: f64,
+    max_it: usize,
+    iters: u64,
+}
+
+/// One cluster of `mc` constraints. Always inlined, and called with `mc` a
+/// literal for the common sizes, so every loop over the cluster's members
+/// is unrolled and its bounds checks fold away.
+#[inline(always)]
+fn shake_one<S: Stencil>(
+    w: &mut Work,
+    mc: usize,
+    c: usize,
     stencil: &S,
     table: &Table,
     plan: &FamilyClusters,
     args: &ClusterArgs<'_>,
-    w: &mut ClusterScratch,
+    fuse: bool,
     q: &mut [f64],
     p: &mut [f64],
-    report: &mut ClusterReport,
 ) -> Result<(), ClusterFailure> {
+    let Work {
+        l,
+        wg0,
+        lu,
+        piv,
+        dinv,
+        nu,
+        s2,
+        x0,
+        max_rel,
+        max_hidden,
+        max_it,
+        iters,
+    } = w;
     let (d, ar) = (S::DIM, S::ARITY);
     let wd = ar * d;
     let tol2 = args.tol * args.tol;
-    for c in 0..plan.len() {
-        let (m0, m1) = (
-            plan.member_start[c] as usize,
-            plan.member_start[c + 1] as usize,
-        );
-        let (p0, p1) = (
-            plan.particle_start[c] as usize,
-            plan.particle_start[c + 1] as usize,
-        );
-        let members = &plan.members[m0..m1];
-        let parts = &plan.particles[p0..p1];
-        let slots = &plan.slots[m0 * ar..m1 * ar];
-        let mc = members.len();
-        for (s, &i) in parts.iter().enumerate() {
-            let i = i as usize;
-            w.x0[s * d..(s + 1) * d].copy_from_slice(&args.q0[i * d..(i + 1) * d]);
-            w.x[s * d..(s + 1) * d].copy_from_slice(&q[i * d..(i + 1) * d]);
-            w.wm[s] = args.inv_mass[i];
+    let (m0, m1) = (
+        plan.member_start[c] as usize,
+        plan.member_start[c + 1] as usize,
+    );
+    let (p0, p1) = (
+        plan.particle_start[c] as usize,
+        plan.particle_start[c + 1] as usize,
+    );
+    let members = &plan.members[m0..m1];
+    let parts = &plan.particles[p0..p1];
+    let slots = &plan.slots[m0 * ar..m1 * ar];
+    debug_assert_eq!(mc, members.len());
+    for (s, &i) in parts.iter().enumerate() {
+        let i = i as usize;
+        x0[s * d..(s + 1) * d].copy_from_slice(&args.q0[i * d..(i + 1) * d]);
+        l.x[s * d..(s + 1) * d].copy_from_slice(&q[i * d..(i + 1) * d]);
+        l.pl[s * d..(s + 1) * d].copy_from_slice(&p[i * d..(i + 1) * d]);
+        l.wm[s] = args.inv_mass[i];
+    }
+    // W G(x0) and the residual scales |∇g_j(x0)|² · extent_j(x0)².
+    for j in 0..mc {
+        let sj = &slots[j * ar..(j + 1) * ar];
+        gather_member::<S>(sj, &x0[..], &mut l.xm);
+        let gr = &mut wg0[j * wd..(j + 1) * wd];
+        stencil.gradient(&l.xm[..wd], table.data(members[j] as usize), gr);
+        let mut n2 = 0.0;
+        for a in 0..ar {
+            let w = l.wm[sj[a] as usize];
+            for k in 0..d {
+                let v = gr[a * d + k];
+                n2 += v * v;
+                gr[a * d + k] = w * v;
+            }
         }
-        // G(x0) and the residual scales |∇g_j(x0)|² · extent_j(x0)².
+        // 1/scale², so the residual test multiplies.
+        s2[j] = 1.0 / (n2 * extent2::<S>(&l.xm[..wd])).max(f64::MIN_POSITIVE);
+        nu[j] = 0.0;
+    }
+    let mut it = 0;
+    let mut need_jac = true;
+    let mut prev = f64::INFINITY;
+    loop {
+        // g at the current iterate (and G when the Jacobian is due).
+        let mut worst = 0.0f64;
+        let mut worst_j = 0;
         for j in 0..mc {
             let sj = &slots[j * ar..(j + 1) * ar];
-            gather_member::<S>(sj, &w.x0, &mut w.xm);
-            let gr = &mut w.gr0[j * wd..(j + 1) * wd];
-            stencil.gradient(&w.xm[..wd], table.data(members[j] as usize), gr);
-            let n2: f64 = gr.iter().map(|v| v * v).sum();
-            w.s2[j] = (n2 * extent2::<S>(&w.xm[..wd])).max(f64::MIN_POSITIVE);
-            w.nu[j] = 0.0;
+            gather_member::<S>(sj, &l.x, &mut l.xm);
+            let data = table.data(members[j] as usize);
+            // With `fuse`, G at every iterate: the last one is G(q1), which
+            // the velocity stage needs (no separate evaluation at q1).
+            let g = if need_jac || fuse {
+                stencil.gradient(&l.xm[..wd], data, &mut l.gr[j * wd..(j + 1) * wd])
+            } else {
+                stencil.value(&l.xm[..wd], data)
+            };
+            l.g[j] = g;
+            let r = g * g * s2[j];
+            if !(r <= worst) {
+                worst = r;
+                worst_j = j;
+            }
         }
-        let mut it = 0;
-        loop {
-            // g(x) and G(x) at the current iterate.
-            let mut worst = 0.0f64;
-            let mut worst_j = 0;
-            let mut done = true;
+        if worst <= tol2 {
+            *max_rel = max_rel.max(worst);
+            *max_it = (*max_it).max(it);
+            *iters += it as u64;
+            break;
+        }
+        if !worst.is_finite() || it >= args.max_iter {
+            return Err(ClusterFailure {
+                member: members[worst_j] as usize,
+                residual: worst.sqrt(),
+                iterations: it,
+                kind: if worst.is_finite() {
+                    FailureKind::NotConverged
+                } else {
+                    FailureKind::NotFinite
+                },
+            });
+        }
+        if !need_jac && worst > 0.25 * prev {
+            // Poor contraction: the Jacobian at this iterate.
+            for j in 0..if fuse { 0 } else { mc } {
+                let sj = &slots[j * ar..(j + 1) * ar];
+                gather_member::<S>(sj, &l.x, &mut l.xm);
+                let data = table.data(members[j] as usize);
+                stencil.gradient(&l.xm[..wd], data, &mut l.gr[j * wd..(j + 1) * wd]);
+            }
+            need_jac = true;
+        }
+        prev = worst;
+        if need_jac {
+            // J = G(x) W G(x0)ᵀ.
             for j in 0..mc {
                 let sj = &slots[j * ar..(j + 1) * ar];
-                gather_member::<S>(sj, &w.x, &mut w.xm);
-                let gr = &mut w.gr1[j * wd..(j + 1) * wd];
-                let g = stencil.gradient(&w.xm[..wd], table.data(members[j] as usize), gr);
-                w.g[j] = g;
-                let r = g * g;
-                if !(r <= tol2 * w.s2[j]) {
-                    done = false;
-                    if !g.is_finite() {
-                        return Err(ClusterFailure {
-                            member: members[j] as usize,
-                            residual: f64::NAN,
-                            iterations: it,
-                            kind: FailureKind::NotFinite,
-                        });
-                    }
-                }
-                let rel = r / w.s2[j];
-                if rel > worst {
-                    worst = rel;
-                    worst_j = j;
+                let gj = &l.gr[j * wd..(j + 1) * wd];
+                for m in 0..mc {
+                    let sm = &slots[m * ar..(m + 1) * ar];
+                    let vm = &wg0[m * wd..(m + 1) * wd];
+                    lu[j * mc + m] = coupling_w::<S>(sj, gj, sm, vm);
                 }
             }
-            if done {
-                report.max_rel = report.max_rel.max(worst.sqrt());
-                report.max_iter = report.max_iter.max(it);
-                report.iterations += it as u64;
-                break;
-            }
-            if it >= args.max_iter {
-                return Err(ClusterFailure {
-                    member: members[worst_j] as usize,
-                    residual: worst.sqrt(),
-                    iterations: it,
-                    kind: FailureKind::NotConverged,
-                });
-            }
-            // J = G(x) W G(x0)ᵀ, δ = J⁻¹ g.
-            for j in 0..mc {
-                let sj = &slots[j * ar..(j + 1) * ar];
-                let gj = &w.gr1[j * wd..(j + 1) * wd];
-                for l in 0..mc {
-                    let sl = &slots[l * ar..(l + 1) * ar];
-                    let gl = &w.gr0[l * wd..(l + 1) * wd];
-                    w.jac[j * mc + l] = coupling::<S>(sj, gj, sl, gl, &w.wm);
-                }
-            }
-            if !lu_solve(mc, &mut w.jac[..mc * mc], &mut w.g[..mc]) {
+            if !lu_factor(mc, &mut lu[..mc * mc], &mut piv[..mc], &mut dinv[..mc]) {
                 return Err(ClusterFailure {
                     member: members[worst_j] as usize,
                     residual: worst.sqrt(),
@@ -394,41 +524,116 @@ pub(crate) fn shake_clusters<S: Stencil>(
                     kind: FailureKind::SingularNewton,
                 });
             }
-            // x ← x − W G(x0)ᵀ δ, ν ← ν + δ.
-            for l in 0..mc {
-                let dl = w.g[l];
-                w.nu[l] += dl;
-                let sl = &slots[l * ar..(l + 1) * ar];
-                let gl = &w.gr0[l * wd..(l + 1) * wd];
-                for a in 0..ar {
-                    let s = sl[a] as usize;
-                    let f = w.wm[s] * dl;
-                    for k in 0..d {
-                        w.x[s * d + k] -= f * gl[a * d + k];
-                    }
+            // With `fuse` G is evaluated at every iterate anyway: use it
+            // (exact Newton, quadratic convergence).
+            need_jac = fuse;
+        }
+        lu_solve(mc, &lu[..mc * mc], &piv[..mc], &dinv[..mc], &mut l.g[..mc]);
+        // x ← x − W G(x0)ᵀ δ, ν ← ν + δ.
+        for m in 0..mc {
+            let dl = l.g[m];
+            nu[m] += dl;
+            let sm = &slots[m * ar..(m + 1) * ar];
+            let vm = &wg0[m * wd..(m + 1) * wd];
+            for a in 0..ar {
+                let s = sm[a] as usize;
+                for k in 0..d {
+                    l.x[s * d + k] -= dl * vm[a * d + k];
                 }
             }
-            it += 1;
+        }
+        it += 1;
+    }
+    for (s, &i) in parts.iter().enumerate() {
+        let i = i as usize;
+        q[i * d..(i + 1) * d].copy_from_slice(&l.x[s * d..(s + 1) * d]);
+    }
+    if args.inv_h != 0.0 {
+        // p½ = p̃ − G(x0)ᵀ ν / h (wg0 holds W G(x0): divide W out).
+        for m in 0..mc {
+            let f = nu[m] * args.inv_h;
+            let sm = &slots[m * ar..(m + 1) * ar];
+            let vm = &wg0[m * wd..(m + 1) * wd];
+            for a in 0..ar {
+                let s = sm[a] as usize;
+                let fm = f / l.wm[s];
+                for k in 0..d {
+                    l.pl[s * d + k] -= fm * vm[a * d + k];
+                }
+            }
+        }
+        if fuse {
+            match l.project::<S>(mc, slots) {
+                Some(h) => *max_hidden = max_hidden.max(h),
+                None => {
+                    return Err(ClusterFailure {
+                        member: members[0] as usize,
+                        residual: f64::NAN,
+                        iterations: it,
+                        kind: FailureKind::SingularN,
+                    })
+                }
+            }
         }
         for (s, &i) in parts.iter().enumerate() {
             let i = i as usize;
-            q[i * d..(i + 1) * d].copy_from_slice(&w.x[s * d..(s + 1) * d]);
-        }
-        if args.inv_h != 0.0 {
-            // p½ = p̃ − G(x0)ᵀ ν / h.
-            for l in 0..mc {
-                let f = w.nu[l] * args.inv_h;
-                let sl = &slots[l * ar..(l + 1) * ar];
-                let gl = &w.gr0[l * wd..(l + 1) * wd];
-                for a in 0..ar {
-                    let i = parts[sl[a] as usize] as usize;
-                    for k in 0..d {
-                        p[i * d + k] -= f * gl[a * d + k];
-                    }
-                }
-            }
+            p[i * d..(i + 1) * d].copy_from_slice(&l.pl[s * d..(s + 1) * d]);
         }
     }
+    Ok(())
+}
+
+/// The position stage on every cluster of one family: on entry `q` holds
+/// q̃ = q0 + h M⁻¹ p̃ and `p` holds p̃ on the cluster's particles; on exit q1
+/// with g(q1) = 0 to the tolerance, and p½ (when `inv_h` ≠ 0). With
+/// `fuse` (no potential: p′ = p½), the velocity stage follows on the same
+/// local copy, while it is in L1.
+///
+/// Newton's matrix is the Jacobian G(x) W G(x0)ᵀ. Without `fuse` it is
+/// evaluated at the predictor x̃ and factorised once (a simplified Newton:
+/// x1 − x̃ = O(h²|v|²), so the contraction per iteration is about
+/// (h|v|/l)²), and re-evaluated at the current iterate when an iteration
+/// contracts by less than ½. With `fuse`, G is evaluated at every iterate
+/// anyway (the last one serves the velocity stage), so Newton is exact.
+pub(crate) fn shake_clusters<S: Stencil>(
+    stencil: &S,
+    table: &Table,
+    plan: &FamilyClusters,
+    args: &ClusterArgs<'_>,
+    fuse: bool,
+    q: &mut [f64],
+    p: &mut [f64],
+    report: &mut ClusterReport,
+) -> Result<(), ClusterFailure> {
+    let mut w = Work {
+        l: Local::new(),
+        wg0: [0.0; MAX_CLUSTER * ML],
+        lu: [0.0; MAX_CLUSTER * MAX_CLUSTER],
+        piv: [0; MAX_CLUSTER],
+        dinv: [0.0; MAX_CLUSTER],
+        nu: [0.0; MAX_CLUSTER],
+        s2: [0.0; MAX_CLUSTER],
+        x0: [0.0; MAX_CLUSTER_COORDS],
+        max_rel: 0.0,
+        max_hidden: 0.0,
+        max_it: 0,
+        iters: 0,
+    };
+    for c in 0..plan.len() {
+        let mc = (plan.member_start[c + 1] - plan.member_start[c]) as usize;
+        let (st, tb, pl, a) = (stencil, table, plan, args);
+        match mc {
+            1 => shake_one(&mut w, 1, c, st, tb, pl, a, fuse, q, p),
+            2 => shake_one(&mut w, 2, c, st, tb, pl, a, fuse, q, p),
+            3 => shake_one(&mut w, 3, c, st, tb, pl, a, fuse, q, p),
+            4 => shake_one(&mut w, 4, c, st, tb, pl, a, fuse, q, p),
+            _ => shake_one(&mut w, mc, c, st, tb, pl, a, fuse, q, p),
+        }?;
+    }
+    report.max_rel = report.max_rel.max(w.max_rel.sqrt());
+    report.max_hidden = report.max_hidden.max(w.max_hidden.sqrt());
+    report.max_iter = report.max_iter.max(w.max_it);
+    report.iterations += w.iters;
     Ok(())
 }
 
@@ -439,13 +644,14 @@ pub(crate) fn project_clusters<S: Stencil>(
     table: &Table,
     plan: &FamilyClusters,
     inv_mass: &[f64],
-    w: &mut ClusterScratch,
     q: &[f64],
     p: &mut [f64],
     report: &mut ClusterReport,
 ) -> Result<(), ClusterFailure> {
     let (d, ar) = (S::DIM, S::ARITY);
     let wd = ar * d;
+    let mut l = Local::new();
+    let mut max_hidden = 0.0f64;
     for c in 0..plan.len() {
         let (m0, m1) = (
             plan.member_start[c] as usize,
@@ -461,79 +667,32 @@ pub(crate) fn project_clusters<S: Stencil>(
         let mc = members.len();
         for (s, &i) in parts.iter().enumerate() {
             let i = i as usize;
-            w.x[s * d..(s + 1) * d].copy_from_slice(&q[i * d..(i + 1) * d]);
-            w.pl[s * d..(s + 1) * d].copy_from_slice(&p[i * d..(i + 1) * d]);
-            w.wm[s] = inv_mass[i];
+            l.x[s * d..(s + 1) * d].copy_from_slice(&q[i * d..(i + 1) * d]);
+            l.pl[s * d..(s + 1) * d].copy_from_slice(&p[i * d..(i + 1) * d]);
+            l.wm[s] = inv_mass[i];
         }
         for j in 0..mc {
             let sj = &slots[j * ar..(j + 1) * ar];
-            gather_member::<S>(sj, &w.x, &mut w.xm);
-            let gr = &mut w.gr1[j * wd..(j + 1) * wd];
-            stencil.gradient(&w.xm[..wd], table.data(members[j] as usize), gr);
-            // rhs_j = ∇g_j · W p.
-            let mut r = 0.0;
-            for a in 0..ar {
-                let s = sj[a] as usize;
-                let mut dot = 0.0;
-                for k in 0..d {
-                    dot += gr[a * d + k] * w.pl[s * d + k];
-                }
-                r += w.wm[s] * dot;
-            }
-            w.g[j] = r;
+            gather_member::<S>(sj, &l.x, &mut l.xm);
+            let data = table.data(members[j] as usize);
+            stencil.gradient(&l.xm[..wd], data, &mut l.gr[j * wd..(j + 1) * wd]);
         }
-        for j in 0..mc {
-            let sj = &slots[j * ar..(j + 1) * ar];
-            let gj = &w.gr1[j * wd..(j + 1) * wd];
-            for l in 0..=j {
-                let sl = &slots[l * ar..(l + 1) * ar];
-                let gl = &w.gr1[l * wd..(l + 1) * wd];
-                w.jac[j * mc + l] = coupling::<S>(sj, gj, sl, gl, &w.wm);
+        match l.project::<S>(mc, slots) {
+            Some(h) => max_hidden = max_hidden.max(h),
+            None => {
+                return Err(ClusterFailure {
+                    member: members[0] as usize,
+                    residual: f64::NAN,
+                    iterations: 0,
+                    kind: FailureKind::SingularN,
+                })
             }
-        }
-        if !cholesky_solve(mc, &mut w.jac[..mc * mc], &mut w.g[..mc]) {
-            return Err(ClusterFailure {
-                member: members[0] as usize,
-                residual: f64::NAN,
-                iterations: 0,
-                kind: FailureKind::SingularN,
-            });
-        }
-        for l in 0..mc {
-            let mu = w.g[l];
-            let sl = &slots[l * ar..(l + 1) * ar];
-            let gl = &w.gr1[l * wd..(l + 1) * wd];
-            for a in 0..ar {
-                let s = sl[a] as usize;
-                for k in 0..d {
-                    w.pl[s * d + k] -= mu * gl[a * d + k];
-                }
-            }
-        }
-        // The hidden constraints after projection, relative to
-        // |∇g_j| · |velocity of the member's particles|.
-        for j in 0..mc {
-            let sj = &slots[j * ar..(j + 1) * ar];
-            let gr = &w.gr1[j * wd..(j + 1) * wd];
-            let (mut r, mut v2, mut n2) = (0.0, 0.0, 0.0);
-            for a in 0..ar {
-                let s = sj[a] as usize;
-                let mut dot = 0.0;
-                for k in 0..d {
-                    let v = w.wm[s] * w.pl[s * d + k];
-                    dot += gr[a * d + k] * v;
-                    v2 += v * v;
-                    n2 += gr[a * d + k] * gr[a * d + k];
-                }
-                r += dot;
-            }
-            let rel = r.abs() / (n2 * v2).sqrt().max(f64::MIN_POSITIVE);
-            report.max_hidden = report.max_hidden.max(rel);
         }
         for (s, &i) in parts.iter().enumerate() {
             let i = i as usize;
-            p[i * d..(i + 1) * d].copy_from_slice(&w.pl[s * d..(s + 1) * d]);
+            p[i * d..(i + 1) * d].copy_from_slice(&l.pl[s * d..(s + 1) * d]);
         }
     }
+    report.max_hidden = report.max_hidden.max(max_hidden.sqrt());
     Ok(())
 }

@@ -37,7 +37,7 @@ mod system;
 mod table;
 
 #[doc(hidden)]
-pub use cluster::{ClusterArgs, ClusterFailure, ClusterReport, ClusterScratch, FamilyClusters};
+pub use cluster::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 pub use error::ParticleError;
 pub use rattle::{Method, Options, Rattle, SolverChoice, StepReport};
 pub use run::{RunOutcome, RunSummary};

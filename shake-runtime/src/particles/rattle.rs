@@ -3,9 +3,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::cluster::{
-    ClusterArgs, ClusterFailure, ClusterReport, ClusterScratch, FailureKind, FamilyClusters,
-};
+use super::cluster::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
 use super::graph::{self, Numbering};
 use super::{ParticleError, ParticleState, ParticleSystem};
 use crate::solver::SpdSolver;
@@ -84,6 +82,9 @@ pub struct StepReport {
     /// Newton iterations: the largest of one cluster on the cluster path,
     /// the global count otherwise.
     pub newton_iterations: usize,
+    /// Newton iterations summed over clusters (the global count on the
+    /// coupled path).
+    pub newton_total: u64,
 }
 
 /// Unique stamps tie a state to the caches (forces, N's factor) of the
@@ -92,10 +93,7 @@ static STAMPS: AtomicU64 = AtomicU64::new(1);
 
 /// The solver proper.
 enum Path {
-    Clusters {
-        plans: Vec<FamilyClusters>,
-        scratch: Box<ClusterScratch>,
-    },
+    Clusters { plans: Vec<FamilyClusters> },
     Global(Box<Global>),
 }
 
@@ -188,7 +186,6 @@ impl Rattle {
         let path = if choice == SolverChoice::Clusters {
             Path::Clusters {
                 plans: comps.cluster_plans(&system, &num),
-                scratch: Box::new(ClusterScratch::new()),
             }
         } else {
             let (pattern, b) = comps.pattern(m);
@@ -245,6 +242,14 @@ impl Rattle {
         &self.options
     }
 
+    /// Independent clusters on the cluster path (1 on the coupled path).
+    pub fn clusters(&self) -> usize {
+        match &self.path {
+            Path::Clusters { plans } => plans.iter().map(|p| p.len()).sum(),
+            Path::Global(_) => 1,
+        }
+    }
+
     /// "clusters", "band" or "sparse": the solver chosen.
     pub fn solver_name(&self) -> &'static str {
         match &self.path {
@@ -258,12 +263,21 @@ impl Rattle {
     pub fn workspace_bytes(&self) -> usize {
         let mut b = (self.qn.capacity() + self.pn.capacity() + self.force.capacity()) * 8;
         match &self.path {
-            Path::Clusters { plans, scratch } => {
-                b += plans.iter().map(|p| p.bytes()).sum::<usize>() + scratch.bytes();
+            Path::Clusters { plans } => {
+                b += plans.iter().map(|p| p.bytes()).sum::<usize>();
             }
             Path::Global(g) => b += g.bytes(),
         }
         b
+    }
+
+    /// True when the cluster path does the velocity stage inside the
+    /// position stage (RATTLE without potential: p′ = p½, so each cluster
+    /// is projected while its numbers are in L1).
+    fn fused(&self) -> bool {
+        matches!(self.path, Path::Clusters { .. })
+            && !self.has_potential
+            && self.options.method == Method::Rattle
     }
 
     fn new_stamp(&mut self) -> u64 {
@@ -404,7 +418,7 @@ impl Rattle {
                 *p -= half * f;
             }
         }
-        if self.options.method == Method::Rattle {
+        if self.options.method == Method::Rattle && !self.fused() {
             self.velocity_stage(k, time, &mut report)?;
         }
         Self::not_finite(k, time, "p", &self.pn)?;
@@ -466,14 +480,15 @@ impl Rattle {
             tol: self.options.tol,
             max_iter: self.options.max_iter,
         };
+        let fuse = self.fused() && inv_h != 0.0;
         match &mut self.path {
-            Path::Clusters { plans, scratch } => {
+            Path::Clusters { plans } => {
                 let mut rep = ClusterReport::default();
                 for (f, fam) in self.system.constraint_families().iter().enumerate() {
                     if let Err(e) = fam.shake_clusters(
                         &plans[f],
                         &args,
-                        scratch,
+                        fuse,
                         &mut self.qn,
                         &mut self.pn,
                         &mut rep,
@@ -482,7 +497,9 @@ impl Rattle {
                     }
                 }
                 report.max_rel_g = rep.max_rel;
+                report.max_hidden = rep.max_hidden;
                 report.newton_iterations = rep.max_iter;
+                report.newton_total = rep.iterations;
                 Ok(())
             }
             Path::Global(g) => {
@@ -510,13 +527,12 @@ impl Rattle {
         report: &mut StepReport,
     ) -> Result<(), ParticleError> {
         match &mut self.path {
-            Path::Clusters { plans, scratch } => {
+            Path::Clusters { plans } => {
                 let mut rep = ClusterReport::default();
                 for (f, fam) in self.system.constraint_families().iter().enumerate() {
                     if let Err(e) = fam.project_clusters(
                         &plans[f],
                         self.system.inverse_masses(),
-                        scratch,
                         &self.qn,
                         &mut self.pn,
                         &mut rep,
@@ -748,6 +764,7 @@ impl Global {
             if worst <= tol2 {
                 report.max_rel_g = worst.sqrt();
                 report.newton_iterations = it;
+                report.newton_total = it as u64;
                 break;
             }
             if it == 0 {

@@ -14,7 +14,8 @@ pub struct RunSummary {
     pub max_hidden: f64,
     /// Largest Newton iteration count of any step.
     pub max_newton_iterations: usize,
-    /// Newton iterations summed over steps.
+    /// Newton iterations summed over steps (and over clusters on the
+    /// cluster path).
     pub newton_iterations: u64,
 }
 
@@ -81,7 +82,7 @@ impl Rattle {
                     summary.max_hidden = summary.max_hidden.max(r.max_hidden);
                     summary.max_newton_iterations =
                         summary.max_newton_iterations.max(r.newton_iterations);
-                    summary.newton_iterations += r.newton_iterations as u64;
+                    summary.newton_iterations += r.newton_total;
                     if stride > 0 && state.step.is_multiple_of(stride) {
                         trajectory.push(state);
                     }

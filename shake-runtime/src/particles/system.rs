@@ -1,8 +1,6 @@
 //! A system of particles: masses, constraint families, potential families.
 
-use super::cluster::{
-    self, ClusterArgs, ClusterFailure, ClusterReport, ClusterScratch, FamilyClusters,
-};
+use super::cluster::{self, ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 use super::{Stencil, Table, TopologyError};
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
@@ -25,14 +23,15 @@ pub trait ConstraintFamily: Send + Sync {
     /// the relative residual of member k is |g_k| / √scale2_k.
     fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]);
     /// The position stage of RATTLE on every independent cluster of this
-    /// family (per-cluster exact Newton; monomorphic in the stencil).
+    /// family (per-cluster Newton; monomorphic in the stencil); with `fuse`
+    /// (no potential) the velocity stage too.
     #[doc(hidden)]
     #[allow(clippy::too_many_arguments)]
     fn shake_clusters(
         &self,
         plan: &FamilyClusters,
         args: &ClusterArgs<'_>,
-        scratch: &mut ClusterScratch,
+        fuse: bool,
         q: &mut [f64],
         p: &mut [f64],
         report: &mut ClusterReport,
@@ -44,7 +43,6 @@ pub trait ConstraintFamily: Send + Sync {
         &self,
         plan: &FamilyClusters,
         inv_mass: &[f64],
-        scratch: &mut ClusterScratch,
         q: &[f64],
         p: &mut [f64],
         report: &mut ClusterReport,
@@ -127,41 +125,22 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         &self,
         plan: &FamilyClusters,
         args: &ClusterArgs<'_>,
-        scratch: &mut ClusterScratch,
+        fuse: bool,
         q: &mut [f64],
         p: &mut [f64],
         report: &mut ClusterReport,
     ) -> Result<(), ClusterFailure> {
-        cluster::shake_clusters(
-            &self.stencil,
-            &self.table,
-            plan,
-            args,
-            scratch,
-            q,
-            p,
-            report,
-        )
+        cluster::shake_clusters(&self.stencil, &self.table, plan, args, fuse, q, p, report)
     }
     fn project_clusters(
         &self,
         plan: &FamilyClusters,
         inv_mass: &[f64],
-        scratch: &mut ClusterScratch,
         q: &[f64],
         p: &mut [f64],
         report: &mut ClusterReport,
     ) -> Result<(), ClusterFailure> {
-        cluster::project_clusters(
-            &self.stencil,
-            &self.table,
-            plan,
-            inv_mass,
-            scratch,
-            q,
-            p,
-            report,
-        )
+        cluster::project_clusters(&self.stencil, &self.table, plan, inv_mass, q, p, report)
     }
 }
 

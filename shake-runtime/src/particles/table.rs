@@ -215,11 +215,13 @@ impl Table {
     }
 
     /// The particles of member k.
+    #[inline]
     pub fn particles(&self, k: usize) -> &[u32] {
         &self.particles[k * self.arity..(k + 1) * self.arity]
     }
 
     /// The numbers of member k.
+    #[inline]
     pub fn data(&self, k: usize) -> &[f64] {
         &self.data[k * self.width..(k + 1) * self.width]
     }
