@@ -656,34 +656,21 @@ impl Global {
         self.solver.factor()
     }
 
-    /// q ← q − W Gᵀ x (sign −1) for a gradient buffer and per-constraint x.
+    /// out ← out − factor · W^w Gᵀ x, family by family (monomorphic loops).
     fn scatter(
         system: &ParticleSystem,
         num: &Numbering,
         grad: &[f64],
         x: &[f64],
-        scale_by_mass: bool,
+        weighted: bool,
         out: &mut [f64],
         factor: f64,
     ) {
-        let d = system.dim();
         let inv_m = system.inverse_masses();
         for (f, fam) in system.constraint_families().iter().enumerate() {
-            let t = fam.table();
-            let ar = t.arity();
-            let (c0, g0) = (num.offsets[f], num.grad_offsets[f]);
-            let idx = t.all_particles();
-            for k in 0..t.len() {
-                let xk = x[c0 + k] * factor;
-                let gk = &grad[g0 + k * ar * d..g0 + (k + 1) * ar * d];
-                for a in 0..ar {
-                    let i = idx[k * ar + a] as usize;
-                    let s = if scale_by_mass { xk * inv_m[i] } else { xk };
-                    for c in 0..d {
-                        out[i * d + c] -= s * gk[a * d + c];
-                    }
-                }
-            }
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            fam.scatter(&grad[g0..g1], &x[c0..c1], inv_m, weighted, factor, out);
         }
     }
 
@@ -820,63 +807,35 @@ impl Global {
         );
         self.assemble_factor(d, inv_m, 1)
             .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
-        self.hidden(system, num, pn);
+        self.hidden(system, num, pn, false);
         self.solver.solve(&mut self.delta);
         Self::scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
         // The hidden residual after projection, relative per member.
-        self.hidden(system, num, pn);
-        let mut worst = 0.0f64;
-        for (f, fam) in system.constraint_families().iter().enumerate() {
-            let t = fam.table();
-            let ar = t.arity();
-            let (c0, g0) = (num.offsets[f], num.grad_offsets[f]);
-            let idx = t.all_particles();
-            for kk in 0..t.len() {
-                let gk = &self.grad1[g0 + kk * ar * d..g0 + (kk + 1) * ar * d];
-                let (mut v2, mut n2) = (0.0, 0.0);
-                for a in 0..ar {
-                    let i = idx[kk * ar + a] as usize;
-                    for c in 0..d {
-                        let v = inv_m[i] * pn[i * d + c];
-                        v2 += v * v;
-                        n2 += gk[a * d + c] * gk[a * d + c];
-                    }
-                }
-                let rel = self.delta[c0 + kk].abs() / (n2 * v2).sqrt().max(f64::MIN_POSITIVE);
-                if !(rel <= worst) {
-                    worst = rel;
-                }
-            }
-        }
-        report.max_hidden = worst;
+        let worst = self.hidden(system, num, pn, true);
+        report.max_hidden = worst.sqrt();
         // grad1/scale1 (at q1) become the next step's grad0/scale0.
         std::mem::swap(&mut self.grad0, &mut self.grad1);
         std::mem::swap(&mut self.scale0, &mut self.scale1);
         Ok(())
     }
 
-    /// delta ← G(q1) W p (grad1).
-    fn hidden(&mut self, system: &ParticleSystem, num: &Numbering, p: &[f64]) {
-        let d = system.dim();
+    /// delta ← G(q1) W p (grad1); with `ratio`, the largest squared
+    /// relative hidden residual.
+    fn hidden(&mut self, system: &ParticleSystem, num: &Numbering, p: &[f64], ratio: bool) -> f64 {
         let inv_m = system.inverse_masses();
+        let mut worst = 0.0f64;
         for (f, fam) in system.constraint_families().iter().enumerate() {
-            let t = fam.table();
-            let ar = t.arity();
-            let (c0, g0) = (num.offsets[f], num.grad_offsets[f]);
-            let idx = t.all_particles();
-            for kk in 0..t.len() {
-                let gk = &self.grad1[g0 + kk * ar * d..g0 + (kk + 1) * ar * d];
-                let mut s = 0.0;
-                for a in 0..ar {
-                    let i = idx[kk * ar + a] as usize;
-                    let mut dot = 0.0;
-                    for c in 0..d {
-                        dot += gk[a * d + c] * p[i * d + c];
-                    }
-                    s += inv_m[i] * dot;
-                }
-                self.delta[c0 + kk] = s;
-            }
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            let w = fam.hidden(
+                &self.grad1[g0..g1],
+                inv_m,
+                p,
+                &mut self.delta[c0..c1],
+                ratio,
+            );
+            worst = worst.max(w);
         }
+        worst
     }
 }

@@ -22,6 +22,32 @@ pub trait ConstraintFamily: Send + Sync {
     /// Σ_a |x_a − x̄|² over the member's particles, |x_a|² for one particle):
     /// the relative residual of member k is |g_k| / √scale2_k.
     fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]);
+    /// out ← out − factor · W^w Gᵀ x over this family's members: every
+    /// member k's gradient block (in `grad`, the layout of
+    /// [`gradients`](Self::gradients)) times x_k, scaled by the particle's
+    /// inverse mass when `weighted`, subtracted from its particles' entries.
+    #[doc(hidden)]
+    fn scatter(
+        &self,
+        grad: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    );
+    /// out_k ← ∇g_k · M⁻¹ p for every member (gradients in `grad`); with
+    /// `ratio`, returns max_k out_k² / (|∇g_k|² · |M⁻¹ p|² over k's
+    /// particles), the squared relative hidden-constraint residual.
+    #[doc(hidden)]
+    fn hidden(
+        &self,
+        grad: &[f64],
+        inv_mass: &[f64],
+        p: &[f64],
+        out: &mut [f64],
+        ratio: bool,
+    ) -> f64;
     /// The position stage of RATTLE on every independent cluster of this
     /// family (per-cluster Newton; monomorphic in the stencil); with `fuse`
     /// (no potential) the velocity stage too.
@@ -71,7 +97,9 @@ impl<S: Stencil> Family<S> {
     /// Gathers member k's coordinates into `x` (`ARITY * DIM` entries).
     #[inline(always)]
     fn gather(&self, q: &[f64], k: usize, x: &mut [f64]) {
-        let d = self.dim;
+        // S::DIM (= self.dim, checked when the family was added) is a
+        // constant: the copies unroll.
+        let d = S::DIM;
         for (a, &i) in self.table.particles(k).iter().enumerate() {
             let i = i as usize * d;
             x[a * d..(a + 1) * d].copy_from_slice(&q[i..i + d]);
@@ -120,6 +148,66 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
             let n2: f64 = gr.iter().map(|v| v * v).sum();
             scale2[k] = (n2 * cluster::extent2::<S>(x)).max(f64::MIN_POSITIVE);
         }
+    }
+    fn scatter(
+        &self,
+        grad: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    ) {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        for k in 0..self.table.len() {
+            let xk = x[k] * factor;
+            let gk = &grad[k * w..(k + 1) * w];
+            let ik = &idx[k * ar..(k + 1) * ar];
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                let s = if weighted { xk * inv_mass[i] } else { xk };
+                for c in 0..d {
+                    out[i * d + c] -= s * gk[a * d + c];
+                }
+            }
+        }
+    }
+    fn hidden(
+        &self,
+        grad: &[f64],
+        inv_mass: &[f64],
+        p: &[f64],
+        out: &mut [f64],
+        ratio: bool,
+    ) -> f64 {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        let mut worst = 0.0f64;
+        for k in 0..self.table.len() {
+            let gk = &grad[k * w..(k + 1) * w];
+            let ik = &idx[k * ar..(k + 1) * ar];
+            let (mut s, mut v2, mut n2) = (0.0, 0.0, 0.0);
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                for c in 0..d {
+                    let v = inv_mass[i] * p[i * d + c];
+                    s += gk[a * d + c] * v;
+                    v2 += v * v;
+                    n2 += gk[a * d + c] * gk[a * d + c];
+                }
+            }
+            out[k] = s;
+            if ratio {
+                let r = s * s / (n2 * v2).max(f64::MIN_POSITIVE);
+                if !(r <= worst) {
+                    worst = r;
+                }
+            }
+        }
+        worst
     }
     fn shake_clusters(
         &self,

@@ -22,6 +22,8 @@ pub struct BandCholesky {
     n: usize,
     b: usize,
     values: Vec<f64>,
+    /// 1/L_ii: the solves multiply instead of dividing.
+    inv_diag: Vec<f64>,
 }
 
 impl BandCholesky {
@@ -32,6 +34,7 @@ impl BandCholesky {
             n,
             b,
             values: vec![0.0; n * (b + 1)],
+            inv_diag: vec![0.0; n],
         }
     }
 
@@ -68,6 +71,7 @@ impl BandCholesky {
                         return Err(i);
                     }
                     v[i * w + b] = s.sqrt();
+                    self.inv_diag[i] = 1.0 / v[i * w + b];
                 } else {
                     v[i * w + (j + b - i)] = s / v[j * w + b];
                 }
@@ -79,6 +83,24 @@ impl BandCholesky {
     /// x ← N⁻¹ x: L y = x, then Lᵀ x = y.
     pub fn solve(&self, x: &mut [f64]) {
         let (n, b) = (self.n, self.b);
+        let x = &mut x[..n];
+        let inv = &self.inv_diag[..n];
+        if b == 1 {
+            // Tridiagonal (a chain): row i stores (L_{i,i-1}, L_ii).
+            let v = &self.values[..2 * n];
+            let mut prev = 0.0;
+            for i in 0..n {
+                prev = (x[i] - v[2 * i] * prev) * inv[i];
+                x[i] = prev;
+            }
+            let mut next = 0.0;
+            for i in (0..n).rev() {
+                let l = if i + 1 < n { v[2 * (i + 1)] } else { 0.0 };
+                next = (x[i] - l * next) * inv[i];
+                x[i] = next;
+            }
+            return;
+        }
         let w = b + 1;
         let v = &self.values;
         for i in 0..n {
@@ -87,7 +109,7 @@ impl BandCholesky {
             for k in lo..i {
                 s -= v[i * w + (k + b - i)] * x[k];
             }
-            x[i] = s / v[i * w + b];
+            x[i] = s * inv[i];
         }
         for i in (0..n).rev() {
             let hi = (i + b).min(n - 1);
@@ -95,12 +117,12 @@ impl BandCholesky {
             for k in i + 1..=hi {
                 s -= v[k * w + (i + b - k)] * x[k];
             }
-            x[i] = s / v[i * w + b];
+            x[i] = s * inv[i];
         }
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.values.capacity() * 8
+        (self.values.capacity() + self.inv_diag.capacity()) * 8
     }
 }
