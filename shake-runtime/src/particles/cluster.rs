@@ -199,10 +199,14 @@ fn lu_factor(n: usize, a: &mut [f64], piv: &mut [usize], dinv: &mut [f64]) -> bo
 /// stored inverse pivots: they sat on the critical path).
 #[inline(always)]
 fn lu_solve(n: usize, a: &[f64], piv: &[usize], dinv: &[f64], b: &mut [f64]) {
+    // The factorisation swapped whole rows (multipliers included), so
+    // P A = L U with P all the swaps in order: apply P first.
     for k in 0..n {
         if piv[k] != k {
             b.swap(k, piv[k]);
         }
+    }
+    for k in 0..n {
         let bk = b[k];
         for i in k + 1..n {
             b[i] -= a[i * n + k] * bk;
@@ -258,6 +262,71 @@ fn cholesky_solve(n: usize, a: &mut [f64], b: &mut [f64]) -> bool {
         b[i] = s * dinv[i];
     }
     true
+}
+
+/// For n ≤ 3: a ← a⁻¹ (row-major, in place) by the adjugate: one division
+/// and independent products, where LU or Cholesky would chain n divisions
+/// or square roots (the latency that bounds a water's step). False when
+/// det a is zero or not finite, or (with `spd`) not positive.
+#[inline(always)]
+fn small_inverse(n: usize, a: &mut [f64], spd: bool) -> bool {
+    let ok = |det: f64| det.is_finite() && if spd { det > 0.0 } else { det != 0.0 };
+    match n {
+        1 => {
+            let det = a[0];
+            if !ok(det) {
+                return false;
+            }
+            a[0] = 1.0 / det;
+        }
+        2 => {
+            let (p, q, r, t) = (a[0], a[1], a[2], a[3]);
+            let det = p * t - q * r;
+            if !ok(det) {
+                return false;
+            }
+            let i = 1.0 / det;
+            a[0] = t * i;
+            a[1] = -q * i;
+            a[2] = -r * i;
+            a[3] = p * i;
+        }
+        _ => {
+            let m = [a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8]];
+            let c00 = m[4] * m[8] - m[5] * m[7];
+            let c01 = m[5] * m[6] - m[3] * m[8];
+            let c02 = m[3] * m[7] - m[4] * m[6];
+            let det = m[0] * c00 + m[1] * c01 + m[2] * c02;
+            if !ok(det) {
+                return false;
+            }
+            let i = 1.0 / det;
+            a[0] = c00 * i;
+            a[1] = (m[2] * m[7] - m[1] * m[8]) * i;
+            a[2] = (m[1] * m[5] - m[2] * m[4]) * i;
+            a[3] = c01 * i;
+            a[4] = (m[0] * m[8] - m[2] * m[6]) * i;
+            a[5] = (m[2] * m[3] - m[0] * m[5]) * i;
+            a[6] = c02 * i;
+            a[7] = (m[1] * m[6] - m[0] * m[7]) * i;
+            a[8] = (m[0] * m[4] - m[1] * m[3]) * i;
+        }
+    }
+    true
+}
+
+/// b ← a b for a small n×n row-major a.
+#[inline(always)]
+fn small_apply(n: usize, a: &[f64], b: &mut [f64]) {
+    let mut out = [0.0; 3];
+    for i in 0..n {
+        let mut s = 0.0;
+        for j in 0..n {
+            s += a[i * n + j] * b[j];
+        }
+        out[i] = s;
+    }
+    b[..n].copy_from_slice(&out[..n]);
 }
 
 const ML: usize = super::system::MAX_LOCAL;
@@ -324,7 +393,17 @@ impl Local {
                 self.n[j * mc + l] = v;
             }
         }
-        if !cholesky_solve(mc, &mut self.n[..mc * mc], &mut self.g[..mc]) {
+        if mc <= 3 {
+            for j in 0..mc {
+                for l in j + 1..mc {
+                    self.n[j * mc + l] = self.n[l * mc + j];
+                }
+            }
+            if !small_inverse(mc, &mut self.n[..mc * mc], true) {
+                return None;
+            }
+            small_apply(mc, &self.n[..mc * mc], &mut self.g[..mc]);
+        } else if !cholesky_solve(mc, &mut self.n[..mc * mc], &mut self.g[..mc]) {
             return None;
         }
         for l in 0..mc {
@@ -365,7 +444,11 @@ impl Local {
 
 /// Everything one cluster works on, on the stack, set up once per family
 /// per stage and reused cluster after cluster.
-struct Work {
+struct Work<'a> {
+    /// ν of every member of the family from the previous step (read when
+    /// `warm`, written after each cluster converges).
+    store: Option<&'a mut [f64]>,
+    warm: bool,
     l: Local,
     wg0: [f64; MAX_CLUSTER * ML],
     lu: [f64; MAX_CLUSTER * MAX_CLUSTER],
@@ -385,7 +468,7 @@ struct Work {
 /// is unrolled and its bounds checks fold away.
 #[inline(always)]
 fn shake_one<S: Stencil>(
-    w: &mut Work,
+    w: &mut Work<'_>,
     mc: usize,
     c: usize,
     stencil: &S,
@@ -397,6 +480,8 @@ fn shake_one<S: Stencil>(
     p: &mut [f64],
 ) -> Result<(), ClusterFailure> {
     let Work {
+        store,
+        warm,
         l,
         wg0,
         lu,
@@ -450,6 +535,23 @@ fn shake_one<S: Stencil>(
         // 1/scale², so the residual test multiplies.
         s2[j] = 1.0 / (n2 * extent2::<S>(&l.xm[..wd])).max(f64::MIN_POSITIVE);
         nu[j] = 0.0;
+    }
+    // Warm start: the previous step's ν (the constraint impulses change
+    // slowly along a trajectory; for a free rigid rotor they are constant),
+    // so Newton starts near the solution: x ← x̃ − W G(x0)ᵀ ν_prev.
+    if let (true, Some(st)) = (*warm, store.as_deref()) {
+        for m in 0..mc {
+            let v = st[members[m] as usize];
+            nu[m] = v;
+            let sm = &slots[m * ar..(m + 1) * ar];
+            let vm = &wg0[m * wd..(m + 1) * wd];
+            for a in 0..ar {
+                let s = sm[a] as usize;
+                for k in 0..d {
+                    l.x[s * d + k] -= v * vm[a * d + k];
+                }
+            }
+        }
     }
     let mut it = 0;
     let mut need_jac = true;
@@ -516,7 +618,12 @@ fn shake_one<S: Stencil>(
                     lu[j * mc + m] = coupling_w::<S>(sj, gj, sm, vm);
                 }
             }
-            if !lu_factor(mc, &mut lu[..mc * mc], &mut piv[..mc], &mut dinv[..mc]) {
+            let ok = if mc <= 3 {
+                small_inverse(mc, &mut lu[..mc * mc], false)
+            } else {
+                lu_factor(mc, &mut lu[..mc * mc], &mut piv[..mc], &mut dinv[..mc])
+            };
+            if !ok {
                 return Err(ClusterFailure {
                     member: members[worst_j] as usize,
                     residual: worst.sqrt(),
@@ -528,7 +635,11 @@ fn shake_one<S: Stencil>(
             // (exact Newton, quadratic convergence).
             need_jac = fuse;
         }
-        lu_solve(mc, &lu[..mc * mc], &piv[..mc], &dinv[..mc], &mut l.g[..mc]);
+        if mc <= 3 {
+            small_apply(mc, &lu[..mc * mc], &mut l.g[..mc]);
+        } else {
+            lu_solve(mc, &lu[..mc * mc], &piv[..mc], &dinv[..mc], &mut l.g[..mc]);
+        }
         // x ← x − W G(x0)ᵀ δ, ν ← ν + δ.
         for m in 0..mc {
             let dl = l.g[m];
@@ -547,6 +658,11 @@ fn shake_one<S: Stencil>(
     for (s, &i) in parts.iter().enumerate() {
         let i = i as usize;
         q[i * d..(i + 1) * d].copy_from_slice(&l.x[s * d..(s + 1) * d]);
+    }
+    if let Some(st) = store.as_deref_mut() {
+        for m in 0..mc {
+            st[members[m] as usize] = nu[m];
+        }
     }
     if args.inv_h != 0.0 {
         // p½ = p̃ − G(x0)ᵀ ν / h (wg0 holds W G(x0): divide W out).
@@ -601,11 +717,15 @@ pub(crate) fn shake_clusters<S: Stencil>(
     plan: &FamilyClusters,
     args: &ClusterArgs<'_>,
     fuse: bool,
+    store: Option<&mut [f64]>,
+    warm: bool,
     q: &mut [f64],
     p: &mut [f64],
     report: &mut ClusterReport,
 ) -> Result<(), ClusterFailure> {
     let mut w = Work {
+        store,
+        warm,
         l: Local::new(),
         wg0: [0.0; MAX_CLUSTER * ML],
         lu: [0.0; MAX_CLUSTER * MAX_CLUSTER],
@@ -695,4 +815,58 @@ pub(crate) fn project_clusters<S: Stencil>(
     }
     report.max_hidden = report.max_hidden.max(max_hidden.sqrt());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A nonsymmetric matrix that needs pivoting, and an SPD one: each
+    /// small solver against the residual of the system it solved.
+    #[test]
+    fn small_solvers_solve() {
+        let a0 = [
+            0.0, 2.0, 1.0, 3.0, //
+            1.0, 1.0, 0.0, 2.0, //
+            4.0, 0.5, 2.0, 1.0, //
+            1.0, 3.0, 1.0, 0.0,
+        ];
+        let b0 = [1.0, -2.0, 0.5, 3.0];
+        for n in 1..=4 {
+            let mut a = [0.0; 16];
+            for i in 0..n {
+                for j in 0..n {
+                    // Shift the diagonal for n = 1 (a00 = 0).
+                    a[i * n + j] = a0[i * 4 + j] + if i == j { 0.25 } else { 0.0 };
+                }
+            }
+            let orig = a;
+            let mut x = b0;
+            let (mut piv, mut dinv) = ([0; 4], [0.0; 4]);
+            assert!(lu_factor(n, &mut a[..n * n], &mut piv, &mut dinv));
+            lu_solve(n, &a[..n * n], &piv, &dinv, &mut x[..n]);
+            let mut y = b0;
+            let mut inv = orig;
+            if n <= 3 {
+                assert!(small_inverse(n, &mut inv[..n * n], false));
+                small_apply(n, &inv[..n * n], &mut y[..n]);
+            }
+            for i in 0..n {
+                let r: f64 = (0..n).map(|j| orig[i * n + j] * x[j]).sum::<f64>() - b0[i];
+                assert!(r.abs() < 1e-14, "LU n={n} row {i}: {r:e}");
+                if n <= 3 {
+                    assert!((x[i] - y[i]).abs() < 1e-14, "inverse n={n}");
+                }
+            }
+        }
+        // SPD: Cholesky.
+        let mut s = [4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0];
+        let orig = s;
+        let mut x = [1.0, 2.0, 3.0];
+        assert!(cholesky_solve(3, &mut s, &mut x));
+        for i in 0..3 {
+            let r: f64 = (0..3).map(|j| orig[i * 3 + j] * x[j]).sum::<f64>() - [1.0, 2.0, 3.0][i];
+            assert!(r.abs() < 1e-14);
+        }
+    }
 }

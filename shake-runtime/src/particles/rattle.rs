@@ -93,7 +93,13 @@ static STAMPS: AtomicU64 = AtomicU64::new(1);
 
 /// The solver proper.
 enum Path {
-    Clusters { plans: Vec<FamilyClusters> },
+    Clusters {
+        plans: Vec<FamilyClusters>,
+        /// ν of every constraint at the last step (warm start).
+        nu: Vec<f64>,
+        /// `nu` belongs to the state with this stamp.
+        nu_stamp: u64,
+    },
     Global(Box<Global>),
 }
 
@@ -186,6 +192,8 @@ impl Rattle {
         let path = if choice == SolverChoice::Clusters {
             Path::Clusters {
                 plans: comps.cluster_plans(&system, &num),
+                nu: vec![0.0; m],
+                nu_stamp: 0,
             }
         } else {
             let (pattern, b) = comps.pattern(m);
@@ -245,7 +253,7 @@ impl Rattle {
     /// Independent clusters on the cluster path (1 on the coupled path).
     pub fn clusters(&self) -> usize {
         match &self.path {
-            Path::Clusters { plans } => plans.iter().map(|p| p.len()).sum(),
+            Path::Clusters { plans, .. } => plans.iter().map(|p| p.len()).sum(),
             Path::Global(_) => 1,
         }
     }
@@ -263,8 +271,8 @@ impl Rattle {
     pub fn workspace_bytes(&self) -> usize {
         let mut b = (self.qn.capacity() + self.pn.capacity() + self.force.capacity()) * 8;
         match &self.path {
-            Path::Clusters { plans } => {
-                b += plans.iter().map(|p| p.bytes()).sum::<usize>();
+            Path::Clusters { plans, nu, .. } => {
+                b += plans.iter().map(|p| p.bytes()).sum::<usize>() + nu.capacity() * 8;
             }
             Path::Global(g) => b += g.bytes(),
         }
@@ -430,13 +438,16 @@ impl Rattle {
         let s = self.new_stamp();
         state.stamp = s;
         self.force_stamp = if self.has_potential { s } else { 0 };
-        if let Path::Global(g) = &mut self.path {
+        match &mut self.path {
             // RATTLE factorised N(q1): the next step's N(q0).
-            g.factor_stamp = if self.options.method == Method::Rattle {
-                s
-            } else {
-                0
-            };
+            Path::Global(g) => {
+                g.factor_stamp = if self.options.method == Method::Rattle {
+                    s
+                } else {
+                    0
+                };
+            }
+            Path::Clusters { nu_stamp, .. } => *nu_stamp = s,
         }
         Ok(report)
     }
@@ -482,13 +493,27 @@ impl Rattle {
         };
         let fuse = self.fused() && inv_h != 0.0;
         match &mut self.path {
-            Path::Clusters { plans } => {
+            Path::Clusters {
+                plans,
+                nu,
+                nu_stamp,
+            } => {
                 let mut rep = ClusterReport::default();
+                // Warm start only along a trajectory (not for projections).
+                let warm = inv_h != 0.0 && continued && *nu_stamp == stamp && stamp != 0;
                 for (f, fam) in self.system.constraint_families().iter().enumerate() {
+                    let (c0, c1) = (self.num.offsets[f], self.num.offsets[f + 1]);
+                    let store = if inv_h != 0.0 {
+                        Some(&mut nu[c0..c1])
+                    } else {
+                        None
+                    };
                     if let Err(e) = fam.shake_clusters(
                         &plans[f],
                         &args,
                         fuse,
+                        store,
+                        warm,
                         &mut self.qn,
                         &mut self.pn,
                         &mut rep,
@@ -527,7 +552,7 @@ impl Rattle {
         report: &mut StepReport,
     ) -> Result<(), ParticleError> {
         match &mut self.path {
-            Path::Clusters { plans } => {
+            Path::Clusters { plans, .. } => {
                 let mut rep = ClusterReport::default();
                 for (f, fam) in self.system.constraint_families().iter().enumerate() {
                     if let Err(e) = fam.project_clusters(

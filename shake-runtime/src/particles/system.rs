@@ -50,7 +50,8 @@ pub trait ConstraintFamily: Send + Sync {
     ) -> f64;
     /// The position stage of RATTLE on every independent cluster of this
     /// family (per-cluster Newton; monomorphic in the stencil); with `fuse`
-    /// (no potential) the velocity stage too.
+    /// (no potential) the velocity stage too. `store` keeps every member's
+    /// ν for a warm start of the next step (used when `warm`).
     #[doc(hidden)]
     #[allow(clippy::too_many_arguments)]
     fn shake_clusters(
@@ -58,6 +59,8 @@ pub trait ConstraintFamily: Send + Sync {
         plan: &FamilyClusters,
         args: &ClusterArgs<'_>,
         fuse: bool,
+        store: Option<&mut [f64]>,
+        warm: bool,
         q: &mut [f64],
         p: &mut [f64],
         report: &mut ClusterReport,
@@ -214,11 +217,24 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         plan: &FamilyClusters,
         args: &ClusterArgs<'_>,
         fuse: bool,
+        store: Option<&mut [f64]>,
+        warm: bool,
         q: &mut [f64],
         p: &mut [f64],
         report: &mut ClusterReport,
     ) -> Result<(), ClusterFailure> {
-        cluster::shake_clusters(&self.stencil, &self.table, plan, args, fuse, q, p, report)
+        cluster::shake_clusters(
+            &self.stencil,
+            &self.table,
+            plan,
+            args,
+            fuse,
+            store,
+            warm,
+            q,
+            p,
+            report,
+        )
     }
     fn project_clusters(
         &self,
