@@ -747,7 +747,12 @@ impl Global {
             self.assemble_factor(d, inv_m, 0)
                 .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
         }
-        self.nu.fill(0.0);
+        if reuse && args.inv_h != 0.0 {
+            // Warm start along a trajectory: the previous step's ν.
+            Self::scatter(system, num, &self.grad0, &self.nu, true, qn, 1.0);
+        } else {
+            self.nu.fill(0.0);
+        }
         let tol2 = args.tol * args.tol;
         let mut it = 0;
         let mut first = f64::NAN;
