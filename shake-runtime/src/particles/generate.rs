@@ -145,7 +145,8 @@ fn thermal_momenta(rng: &mut SplitMix64, masses: &[f64]) -> Vec<f64> {
 /// one constraint family `bond` of 3n distance constraints (O–H1, O–H2,
 /// H1–H2, the last at 2 R sin(θ/2), LAMMPS' `shake ... b 1 a 1`).
 /// Particles are O, H1, H2 per molecule. Momenta are thermal but not yet
-/// projected (see [`thermal_momenta`]'s note).
+/// projected: use [`Rattle::project`](super::Rattle::project), then
+/// [`set_temperature`].
 ///
 /// ```
 /// let (sys, st) = shake_runtime::particles::generate::water(10, 3).unwrap();
