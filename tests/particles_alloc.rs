@@ -51,6 +51,24 @@ fn steps_do_not_allocate() {
         0,
         "sparse"
     );
+    // Clusters with a potential: the separate velocity stage.
+    let (w, ws) = generate::water(20, 1).unwrap();
+    let mut field = shake::runtime::particles::Table::new(1, 3);
+    for a in 0..w.particles() {
+        field.push(&[a], &[0.0, 0.0, 1e-4]).unwrap();
+    }
+    let w = w
+        .with_potential(
+            "field",
+            shake::runtime::particles::stencils::LinearField::<3>,
+            field,
+        )
+        .unwrap();
+    assert_eq!(
+        allocations_per_50_steps(w, ws, SolverChoice::Auto),
+        0,
+        "clusters with forces"
+    );
     let (c, cs) = generate::chain_with_springs(30, 1).unwrap();
     assert_eq!(
         allocations_per_50_steps(c, cs, SolverChoice::Auto),
