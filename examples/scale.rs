@@ -4,6 +4,7 @@
 //!     cargo run --release --example scale            # the full table (~2 min)
 //!     cargo run --release --example scale -- --quick # CI-sized (seconds)
 //!     cargo run --release --example scale -- --case water:10000  # one case
+//!     cargo run --release --example scale -- --tol 1e-12           # another tolerance
 //!
 //! One line per case:
 //! `scale system=water n=10000 constraints=30000 method=rattle tol=1e-10 us_per_step=… ns_per_constraint=… max_rel_g=… max_hidden=… bytes_per_constraint=…`
@@ -63,11 +64,12 @@ fn build(case: &Case) -> (ParticleSystem, ParticleState) {
     .expect("the generators build valid topologies")
 }
 
-fn run(case: &Case) {
+fn run(case: &Case, tol: f64) {
     let (system, mut state) = build(case);
     let h = 2.0;
     let options = Options {
         solver: case.solver,
+        tol,
         ..Options::default()
     };
     let m = system.constraints();
@@ -200,6 +202,12 @@ fn main() {
         n: big / 10,
         solver: SolverChoice::Sparse,
     });
+    // `--tol 1e-12`: another tolerance (default 1e-10).
+    let tol: f64 = std::env::args()
+        .skip_while(|a| a != "--tol")
+        .nth(1)
+        .and_then(|t| t.parse().ok())
+        .unwrap_or(1e-10);
     // `--case water:10000` runs one case (for profiling).
     let only: Option<String> = std::env::args().skip_while(|a| a != "--case").nth(1);
     for c in &cases {
@@ -208,6 +216,6 @@ fn main() {
                 continue;
             }
         }
-        run(c);
+        run(c, tol);
     }
 }
