@@ -800,12 +800,18 @@ impl Global {
                     member,
                 });
             }
-            self.delta.copy_from_slice(&self.g);
+            // g is re-evaluated next iteration: solve in its buffer.
+            std::mem::swap(&mut self.delta, &mut self.g);
             self.solver.solve(&mut self.delta);
             for (n, dl) in self.nu.iter_mut().zip(&self.delta) {
                 *n += dl;
             }
-            Self::scatter(system, num, &self.grad0, &self.delta, true, qn, 1.0);
+            // G(q0) recomputed, not streamed from grad0 (see scatter_at).
+            let inv_m = system.inverse_masses();
+            for (f, fam) in system.constraint_families().iter().enumerate() {
+                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                fam.scatter_at(args.q0, &self.delta[c0..c1], inv_m, true, 1.0, qn);
+            }
             it += 1;
         }
         if args.inv_h != 0.0 {

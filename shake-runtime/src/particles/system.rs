@@ -36,6 +36,19 @@ pub trait ConstraintFamily: Send + Sync {
         factor: f64,
         out: &mut [f64],
     );
+    /// As [`scatter`](Self::scatter) with the gradients recomputed at `q0`
+    /// instead of read from a buffer: on systems too large for the caches,
+    /// evaluating a stencil costs less than streaming its stored gradient.
+    #[doc(hidden)]
+    fn scatter_at(
+        &self,
+        q0: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    );
     /// out_k ← ∇g_k · M⁻¹ p for every member (gradients in `grad`); with
     /// `ratio`, returns max_k out_k² / (|∇g_k|² · |M⁻¹ p|² over k's
     /// particles), the squared relative hidden-constraint residual.
@@ -167,6 +180,35 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         for k in 0..self.table.len() {
             let xk = x[k] * factor;
             let gk = &grad[k * w..(k + 1) * w];
+            let ik = &idx[k * ar..(k + 1) * ar];
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                let s = if weighted { xk * inv_mass[i] } else { xk };
+                for c in 0..d {
+                    out[i * d + c] -= s * gk[a * d + c];
+                }
+            }
+        }
+    }
+    fn scatter_at(
+        &self,
+        q0: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    ) {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        let mut xl = [0.0; MAX_LOCAL];
+        let mut gk = [0.0; MAX_LOCAL];
+        for k in 0..self.table.len() {
+            self.gather(q0, k, &mut xl[..w]);
+            self.stencil
+                .gradient(&xl[..w], self.table.data(k), &mut gk[..w]);
+            let xk = x[k] * factor;
             let ik = &idx[k * ar..(k + 1) * ar];
             for a in 0..ar {
                 let i = ik[a] as usize;
