@@ -67,6 +67,7 @@ pub mod newton;
 pub mod particles;
 pub mod rattle;
 mod shake;
+pub mod solver;
 mod state;
 pub mod system;
 mod trajectory;

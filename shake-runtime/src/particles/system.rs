@@ -1,5 +1,6 @@
 //! A system of particles: masses, constraint families, potential families.
 
+use super::cluster::{self, ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 use super::{Stencil, Table, TopologyError};
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
@@ -16,6 +17,78 @@ pub trait ConstraintFamily: Send + Sync {
     /// particles into `grad` (`arity * dim` entries per member, member after
     /// member, in the layout of [`Stencil`]).
     fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]);
+    /// As [`gradients`](Self::gradients), and the squared residual scale
+    /// |∇g_k|² · extent_k² of every member into `scale2` (extent² =
+    /// Σ_a |x_a − x̄|² over the member's particles, |x_a|² for one particle):
+    /// the relative residual of member k is |g_k| / √scale2_k.
+    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]);
+    /// out ← out − factor · W^w Gᵀ x over this family's members: every
+    /// member k's gradient block (in `grad`, the layout of
+    /// [`gradients`](Self::gradients)) times x_k, scaled by the particle's
+    /// inverse mass when `weighted`, subtracted from its particles' entries.
+    #[doc(hidden)]
+    fn scatter(
+        &self,
+        grad: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    );
+    /// As [`scatter`](Self::scatter) with the gradients recomputed at `q0`
+    /// instead of read from a buffer: on systems too large for the caches,
+    /// evaluating a stencil costs less than streaming its stored gradient.
+    #[doc(hidden)]
+    fn scatter_at(
+        &self,
+        q0: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    );
+    /// out_k ← ∇g_k · M⁻¹ p for every member (gradients in `grad`); with
+    /// `ratio`, returns max_k out_k² / (|∇g_k|² · |M⁻¹ p|² over k's
+    /// particles), the squared relative hidden-constraint residual.
+    #[doc(hidden)]
+    fn hidden(
+        &self,
+        grad: &[f64],
+        inv_mass: &[f64],
+        p: &[f64],
+        out: &mut [f64],
+        ratio: bool,
+    ) -> f64;
+    /// The position stage of RATTLE on every independent cluster of this
+    /// family (per-cluster Newton; monomorphic in the stencil); with `fuse`
+    /// (no potential) the velocity stage too. `store` keeps every member's
+    /// ν for a warm start of the next step (used when `warm`).
+    #[doc(hidden)]
+    #[allow(clippy::too_many_arguments)]
+    fn shake_clusters(
+        &self,
+        plan: &FamilyClusters,
+        args: &ClusterArgs<'_>,
+        fuse: bool,
+        store: Option<&mut [f64]>,
+        warm: bool,
+        q: &mut [f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure>;
+    /// The velocity stage (projection onto M^H) on every cluster.
+    #[doc(hidden)]
+    #[allow(clippy::too_many_arguments)]
+    fn project_clusters(
+        &self,
+        plan: &FamilyClusters,
+        inv_mass: &[f64],
+        q: &[f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure>;
 }
 
 /// A potential family: V_fam(x) = Σ_k f(x_{i_k1}, …; c_k).
@@ -40,7 +113,9 @@ impl<S: Stencil> Family<S> {
     /// Gathers member k's coordinates into `x` (`ARITY * DIM` entries).
     #[inline(always)]
     fn gather(&self, q: &[f64], k: usize, x: &mut [f64]) {
-        let d = self.dim;
+        // S::DIM (= self.dim, checked when the family was added) is a
+        // constant: the copies unroll.
+        let d = S::DIM;
         for (a, &i) in self.table.particles(k).iter().enumerate() {
             let i = i as usize * d;
             x[a * d..(a + 1) * d].copy_from_slice(&q[i..i + d]);
@@ -77,6 +152,141 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
                 .stencil
                 .gradient(x, self.table.data(k), &mut grad[k * w..(k + 1) * w]);
         }
+    }
+    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]) {
+        let w = S::ARITY * S::DIM;
+        let mut x = [0.0; MAX_LOCAL];
+        let x = &mut x[..w];
+        for k in 0..self.table.len() {
+            self.gather(q, k, x);
+            let gr = &mut grad[k * w..(k + 1) * w];
+            g[k] = self.stencil.gradient(x, self.table.data(k), gr);
+            let n2: f64 = gr.iter().map(|v| v * v).sum();
+            scale2[k] = (n2 * cluster::extent2::<S>(x)).max(f64::MIN_POSITIVE);
+        }
+    }
+    fn scatter(
+        &self,
+        grad: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    ) {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        for k in 0..self.table.len() {
+            let xk = x[k] * factor;
+            let gk = &grad[k * w..(k + 1) * w];
+            let ik = &idx[k * ar..(k + 1) * ar];
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                let s = if weighted { xk * inv_mass[i] } else { xk };
+                for c in 0..d {
+                    out[i * d + c] -= s * gk[a * d + c];
+                }
+            }
+        }
+    }
+    fn scatter_at(
+        &self,
+        q0: &[f64],
+        x: &[f64],
+        inv_mass: &[f64],
+        weighted: bool,
+        factor: f64,
+        out: &mut [f64],
+    ) {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        let mut xl = [0.0; MAX_LOCAL];
+        let mut gk = [0.0; MAX_LOCAL];
+        for k in 0..self.table.len() {
+            self.gather(q0, k, &mut xl[..w]);
+            self.stencil
+                .gradient(&xl[..w], self.table.data(k), &mut gk[..w]);
+            let xk = x[k] * factor;
+            let ik = &idx[k * ar..(k + 1) * ar];
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                let s = if weighted { xk * inv_mass[i] } else { xk };
+                for c in 0..d {
+                    out[i * d + c] -= s * gk[a * d + c];
+                }
+            }
+        }
+    }
+    fn hidden(
+        &self,
+        grad: &[f64],
+        inv_mass: &[f64],
+        p: &[f64],
+        out: &mut [f64],
+        ratio: bool,
+    ) -> f64 {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        let mut worst = 0.0f64;
+        for k in 0..self.table.len() {
+            let gk = &grad[k * w..(k + 1) * w];
+            let ik = &idx[k * ar..(k + 1) * ar];
+            let (mut s, mut v2, mut n2) = (0.0, 0.0, 0.0);
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                for c in 0..d {
+                    let v = inv_mass[i] * p[i * d + c];
+                    s += gk[a * d + c] * v;
+                    v2 += v * v;
+                    n2 += gk[a * d + c] * gk[a * d + c];
+                }
+            }
+            out[k] = s;
+            if ratio {
+                let r = s * s / (n2 * v2).max(f64::MIN_POSITIVE);
+                if !(r <= worst) {
+                    worst = r;
+                }
+            }
+        }
+        worst
+    }
+    fn shake_clusters(
+        &self,
+        plan: &FamilyClusters,
+        args: &ClusterArgs<'_>,
+        fuse: bool,
+        store: Option<&mut [f64]>,
+        warm: bool,
+        q: &mut [f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure> {
+        cluster::shake_clusters(
+            &self.stencil,
+            &self.table,
+            plan,
+            args,
+            fuse,
+            store,
+            warm,
+            q,
+            p,
+            report,
+        )
+    }
+    fn project_clusters(
+        &self,
+        plan: &FamilyClusters,
+        inv_mass: &[f64],
+        q: &[f64],
+        p: &mut [f64],
+        report: &mut ClusterReport,
+    ) -> Result<(), ClusterFailure> {
+        cluster::project_clusters(&self.stencil, &self.table, plan, inv_mass, q, p, report)
     }
 }
 

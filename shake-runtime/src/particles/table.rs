@@ -196,11 +196,7 @@ impl Table {
 
     /// The number of rows (members).
     pub fn len(&self) -> usize {
-        if self.arity == 0 {
-            0
-        } else {
-            self.particles.len() / self.arity
-        }
+        self.particles.len().checked_div(self.arity).unwrap_or(0)
     }
 
     /// True when the table has no row.
@@ -219,11 +215,13 @@ impl Table {
     }
 
     /// The particles of member k.
+    #[inline]
     pub fn particles(&self, k: usize) -> &[u32] {
         &self.particles[k * self.arity..(k + 1) * self.arity]
     }
 
     /// The numbers of member k.
+    #[inline]
     pub fn data(&self, k: usize) -> &[f64] {
         &self.data[k * self.width..(k + 1) * self.width]
     }

@@ -1,0 +1,95 @@
+//! How a large-system step, projection or run fails.
+
+use super::TopologyError;
+
+/// Why a step of [`Rattle`](super::Rattle) (or the projection of initial
+/// data) failed, or why a solver could not be built.
+///
+/// Steps are counted from 1: step k maps the state at t0 + (k−1)·h to the
+/// state at t_k = t0 + k·h. A failing step k reports `step = k` and
+/// `time = t0 + k·h` (the time it was to reach, computed as t0 + k·h, not
+/// accumulated); a run that fails there returns the states stored up to step
+/// k − 1. The projection of initial data reports step 0 and time t0.
+///
+/// ```
+/// use shake_runtime::particles::ParticleError;
+/// let e = ParticleError::StepSize { h: -1.0 };
+/// assert!(e.to_string().contains("step size"));
+/// ```
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ParticleError {
+    /// The topology was refused (while building the solver).
+    #[error(transparent)]
+    Topology(#[from] TopologyError),
+    /// h is not a finite positive number.
+    #[error("the step size h = {h} must be finite and positive")]
+    StepSize {
+        /// The step size given.
+        h: f64,
+    },
+    /// A state's arrays do not have n·D entries.
+    #[error("{what} has {got} entries, the system has {expected} coordinates")]
+    Shape {
+        /// "q" or "p".
+        what: &'static str,
+        /// Entries given.
+        got: usize,
+        /// n·D.
+        expected: usize,
+    },
+    /// A forced solver cannot take this constraint graph.
+    #[error("the {solver} solver cannot take this constraint graph: {why}")]
+    Solver {
+        /// The solver asked for.
+        solver: &'static str,
+        /// Why not.
+        why: String,
+    },
+    /// A NaN or infinity in the state or in a computed value.
+    #[error("step {step} (t = {time:.6e}): non-finite value in {what} at index {index}")]
+    NotFinite {
+        /// The failing step.
+        step: u64,
+        /// t0 + step·h.
+        time: f64,
+        /// Where: "q", "p", "constraint", "force", "multiplier".
+        what: &'static str,
+        /// The coordinate (or constraint) index.
+        index: usize,
+    },
+    /// Newton's method for g(q1) = 0 did not bring every constraint's
+    /// relative residual below the tolerance within the iteration budget.
+    #[error("step {step} (t = {time:.6e}): no convergence of g(q1) = 0 after {iterations} iterations, relative residual {residual:.2e} at member {member} of `{family}`")]
+    NotConverged {
+        /// The failing step.
+        step: u64,
+        /// t0 + step·h.
+        time: f64,
+        /// The largest relative residual |g_k| / (|∇g_k| · extent_k).
+        residual: f64,
+        /// Newton iterations done.
+        iterations: usize,
+        /// The family of the worst member.
+        family: String,
+        /// Its row.
+        member: usize,
+    },
+    /// A Newton or projection matrix was singular (or, for N = G M⁻¹ Gᵀ,
+    /// not numerically positive definite): the nondegeneracy condition fails
+    /// at this state.
+    #[error("step {step} (t = {time:.6e}): singular {matrix} at member {member} of `{family}` (iteration {iterations})")]
+    Singular {
+        /// The failing step.
+        step: u64,
+        /// t0 + step·h.
+        time: f64,
+        /// "Newton matrix G(q1) M⁻¹ G(q0)ᵀ" or "N = G M⁻¹ Gᵀ".
+        matrix: &'static str,
+        /// Newton iterations done.
+        iterations: usize,
+        /// A family at fault.
+        family: String,
+        /// A member at fault.
+        member: usize,
+    },
+}

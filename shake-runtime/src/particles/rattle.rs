@@ -1,0 +1,877 @@
+//! RATTLE and SHAKE with Störmer–Verlet on a [`ParticleSystem`]: the step,
+//! the projection of initial data, and the choice of solver.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::cluster::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
+use super::graph::{self, Numbering};
+use super::{ParticleError, ParticleState, ParticleSystem};
+use crate::solver::SpdSolver;
+
+/// SHAKE (positions constrained, momenta as Störmer–Verlet leaves them) or
+/// RATTLE (momenta projected onto M^H as well).
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+pub enum Method {
+    /// RATTLE: p1 also satisfies the hidden constraints G(q1) M⁻¹ p1 = 0.
+    #[default]
+    Rattle,
+    /// SHAKE: no velocity stage.
+    Shake,
+}
+
+/// Which linear solver handles the constraint graph.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+pub enum SolverChoice {
+    /// From the pattern: independent clusters if every cluster is small
+    /// (≤ 12 constraints) and within one family, a band solver if N is
+    /// banded (half-bandwidth ≤ 16) in the constraints' order, faer's sparse
+    /// Cholesky otherwise.
+    #[default]
+    Auto,
+    /// Independent per-cluster Newton (refused if a cluster is too big).
+    Clusters,
+    /// Cholesky within the band of N (refused if the band is wider than 64).
+    Band,
+    /// faer's sparse Cholesky.
+    Sparse,
+}
+
+/// Tolerances and choices of a [`Rattle`].
+///
+/// ```
+/// use shake_runtime::particles::{Method, Options};
+/// let o = Options { method: Method::Shake, ..Options::default() };
+/// assert_eq!(o.tol, 1e-10);
+/// ```
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Options {
+    /// Every constraint's relative residual |g_k(q1)| / (|∇g_k(q0)| ·
+    /// extent_k(q0)) must end ≤ tol (extent_k² = Σ_a |x_a − x̄|² over the
+    /// member's particles; for a distance constraint this is
+    /// ≈ | |r| − l | / l).
+    pub tol: f64,
+    /// Newton iterations allowed per step (per cluster on the cluster path).
+    pub max_iter: usize,
+    /// SHAKE or RATTLE.
+    pub method: Method,
+    /// The linear solver.
+    pub solver: SolverChoice,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            tol: 1e-10,
+            max_iter: 50,
+            method: Method::Rattle,
+            solver: SolverChoice::Auto,
+        }
+    }
+}
+
+/// What one step (or a projection) measured.
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct StepReport {
+    /// Largest relative constraint residual at the end (see
+    /// [`Options::tol`]).
+    pub max_rel_g: f64,
+    /// Largest relative hidden-constraint residual |(G M⁻¹ p)_k| /
+    /// (|∇g_k| · |M⁻¹ p| over member k's particles) after the velocity
+    /// stage (0 for SHAKE, which does not project).
+    pub max_hidden: f64,
+    /// Newton iterations: the largest of one cluster on the cluster path,
+    /// the global count otherwise.
+    pub newton_iterations: usize,
+    /// Newton iterations summed over clusters (the global count on the
+    /// coupled path).
+    pub newton_total: u64,
+}
+
+/// Unique stamps tie a state to the caches (forces, N's factor) of the
+/// solver that produced it.
+static STAMPS: AtomicU64 = AtomicU64::new(1);
+
+/// The solver proper.
+enum Path {
+    Clusters {
+        plans: Vec<FamilyClusters>,
+        /// ν of every constraint at the last step (warm start).
+        nu: Vec<f64>,
+        /// `nu` belongs to the state with this stamp.
+        nu_stamp: u64,
+    },
+    Global(Box<Global>),
+}
+
+/// The coupled path (chains, general graphs): one simplified Newton over
+/// every constraint with the factor of N(q0).
+struct Global {
+    solver: SpdSolver,
+    /// Assembly of N from gradients: entry `pos[e]` gains
+    /// W_{part[e]} ∇_a g_x · ∇_a g_y with the two gradient blocks at
+    /// `ga[e]`, `gb[e]`.
+    pos: Vec<u32>,
+    ga: Vec<u32>,
+    gb: Vec<u32>,
+    part: Vec<u32>,
+    grad0: Vec<f64>,
+    grad1: Vec<f64>,
+    scale0: Vec<f64>,
+    scale1: Vec<f64>,
+    g: Vec<f64>,
+    nu: Vec<f64>,
+    delta: Vec<f64>,
+    /// N's factor holds N(q) of the state with this stamp (0: none).
+    factor_stamp: u64,
+}
+
+/// RATTLE (or SHAKE) with Störmer–Verlet for H = Σ_a |p_a|²/(2 m_a) + V(x)
+/// and holonomic g, on systems of 10³–10⁶ constraints (the paper's Section
+/// 5.1.3, classical formulas):
+///
+/// - p½ = p0 − (h/2) ∇V(q0) − G(q0)ᵀ λ,  q1 = q0 + h M⁻¹ p½,  g(q1) = 0;
+/// - p1 = p½ − (h/2) ∇V(q1) − G(q1)ᵀ μ,  G(q1) M⁻¹ p1 = 0 (RATTLE only).
+///
+/// `new` is the symbolic phase: the constraint graph, its clusters, the
+/// checks that need the topology, the solver and every workspace. A step
+/// allocates nothing.
+///
+/// ```
+/// use shake_runtime::particles::{generate, Options, Rattle};
+/// let (system, mut state) = generate::water(8, 1).unwrap();
+/// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
+/// rattle.project(&mut state).unwrap();
+/// generate::set_temperature(rattle.system(), &mut state, 300.0);
+/// for _ in 0..10 {
+///     let r = rattle.step(&mut state).unwrap();
+///     assert!(r.max_rel_g <= 1e-10 && r.max_hidden < 1e-12);
+/// }
+/// assert_eq!(rattle.solver_name(), "clusters");
+/// assert_eq!(state.step(), 10);
+/// ```
+pub struct Rattle {
+    system: ParticleSystem,
+    h: f64,
+    options: Options,
+    num: Numbering,
+    path: Path,
+    qn: Vec<f64>,
+    pn: Vec<f64>,
+    force: Vec<f64>,
+    has_potential: bool,
+    /// The forces in `force` are ∇V(q) of the state with this stamp.
+    force_stamp: u64,
+    stamp: u64,
+}
+
+impl Rattle {
+    /// The symbolic phase. Refuses h not finite or ≤ 0, a cluster with more
+    /// constraints than coordinates, and a forced solver that cannot take
+    /// the graph.
+    pub fn new(system: ParticleSystem, h: f64, options: Options) -> Result<Self, ParticleError> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(ParticleError::StepSize { h });
+        }
+        let num = Numbering::new(&system);
+        let comps = graph::components(&system, &num)?;
+        let m = system.constraints();
+        let small = comps.all_small(&system, &num);
+        let choice = match options.solver {
+            SolverChoice::Auto if small => SolverChoice::Clusters,
+            SolverChoice::Clusters if !small => {
+                return Err(ParticleError::Solver {
+                    solver: "clusters",
+                    why: format!(
+                        "a cluster has more than {} constraints or spans families",
+                        super::cluster::MAX_CLUSTER
+                    ),
+                })
+            }
+            c => c,
+        };
+        let path = if choice == SolverChoice::Clusters {
+            Path::Clusters {
+                plans: comps.cluster_plans(&system, &num),
+                nu: vec![0.0; m],
+                nu_stamp: 0,
+            }
+        } else {
+            let (pattern, b) = comps.pattern(m);
+            let solver = match choice {
+                SolverChoice::Band if b > 64 => {
+                    return Err(ParticleError::Solver {
+                        solver: "band",
+                        why: format!("N's half-bandwidth is {b} (at most 64)"),
+                    })
+                }
+                SolverChoice::Band => SpdSolver::band(m, &pattern),
+                SolverChoice::Auto if b <= 16 => SpdSolver::band(m, &pattern),
+                _ => SpdSolver::sparse(m, &pattern).map_err(|why| ParticleError::Solver {
+                    solver: "sparse",
+                    why,
+                })?,
+            };
+            drop(pattern);
+            Path::Global(Box::new(Global::new(&system, &num, &comps, solver)))
+        };
+        let d = system.particles() * system.dim();
+        let has_potential = !system.potential_families().is_empty();
+        Ok(Rattle {
+            h,
+            options,
+            num,
+            path,
+            qn: vec![0.0; d],
+            pn: vec![0.0; d],
+            force: if has_potential {
+                vec![0.0; d]
+            } else {
+                Vec::new()
+            },
+            has_potential,
+            force_stamp: 0,
+            stamp: 0,
+            system,
+        })
+    }
+
+    /// The system.
+    pub fn system(&self) -> &ParticleSystem {
+        &self.system
+    }
+
+    /// The step size h.
+    pub fn step_size(&self) -> f64 {
+        self.h
+    }
+
+    /// The options.
+    pub fn options(&self) -> &Options {
+        &self.options
+    }
+
+    /// Independent clusters on the cluster path (1 on the coupled path).
+    pub fn clusters(&self) -> usize {
+        match &self.path {
+            Path::Clusters { plans, .. } => plans.iter().map(|p| p.len()).sum(),
+            Path::Global(_) => 1,
+        }
+    }
+
+    /// "clusters", "band" or "sparse": the solver chosen.
+    pub fn solver_name(&self) -> &'static str {
+        match &self.path {
+            Path::Clusters { .. } => "clusters",
+            Path::Global(g) => g.solver.name(),
+        }
+    }
+
+    /// Bytes held by the solver and its workspaces (not the system's tables
+    /// or the state).
+    pub fn workspace_bytes(&self) -> usize {
+        let mut b = (self.qn.capacity() + self.pn.capacity() + self.force.capacity()) * 8;
+        match &self.path {
+            Path::Clusters { plans, nu, .. } => {
+                b += plans.iter().map(|p| p.bytes()).sum::<usize>() + nu.capacity() * 8;
+            }
+            Path::Global(g) => b += g.bytes(),
+        }
+        b
+    }
+
+    /// True when the cluster path does the velocity stage inside the
+    /// position stage (RATTLE without potential: p′ = p½, so each cluster
+    /// is projected while its numbers are in L1).
+    fn fused(&self) -> bool {
+        matches!(self.path, Path::Clusters { .. })
+            && !self.has_potential
+            && self.options.method == Method::Rattle
+    }
+
+    fn new_stamp(&mut self) -> u64 {
+        self.stamp = STAMPS.fetch_add(1, Ordering::Relaxed);
+        self.stamp
+    }
+
+    fn check_shape(&self, state: &ParticleState) -> Result<(), ParticleError> {
+        let d = self.qn.len();
+        if state.q.len() != d {
+            return Err(ParticleError::Shape {
+                what: "q",
+                got: state.q.len(),
+                expected: d,
+            });
+        }
+        if state.p.len() != d {
+            return Err(ParticleError::Shape {
+                what: "p",
+                got: state.p.len(),
+                expected: d,
+            });
+        }
+        Ok(())
+    }
+
+    fn not_finite(
+        step: u64,
+        time: f64,
+        what: &'static str,
+        v: &[f64],
+    ) -> Result<(), ParticleError> {
+        match v.iter().position(|x| !x.is_finite()) {
+            Some(index) => Err(ParticleError::NotFinite {
+                step,
+                time,
+                what,
+                index,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// ∇V(q) into `self.force`.
+    fn forces(&mut self, q: &[f64], step: u64, time: f64) -> Result<(), ParticleError> {
+        self.force.fill(0.0);
+        for f in self.system.potential_families() {
+            f.energy_gradient(q, &mut self.force);
+        }
+        Self::not_finite(step, time, "force", &self.force)
+    }
+
+    fn cluster_error(&self, f: usize, e: ClusterFailure, step: u64, time: f64) -> ParticleError {
+        let family = self.system.constraint_families()[f].name().to_string();
+        match e.kind {
+            FailureKind::NotConverged => ParticleError::NotConverged {
+                step,
+                time,
+                residual: e.residual,
+                iterations: e.iterations,
+                family,
+                member: e.member,
+            },
+            FailureKind::SingularNewton => ParticleError::Singular {
+                step,
+                time,
+                matrix: "Newton matrix G(q1) M⁻¹ G(q0)ᵀ",
+                iterations: e.iterations,
+                family,
+                member: e.member,
+            },
+            FailureKind::SingularN => ParticleError::Singular {
+                step,
+                time,
+                matrix: "N = G M⁻¹ Gᵀ",
+                iterations: e.iterations,
+                family,
+                member: e.member,
+            },
+            FailureKind::NotFinite => ParticleError::NotFinite {
+                step,
+                time,
+                what: "constraint",
+                index: self.num.offsets[f] + e.member,
+            },
+        }
+    }
+
+    /// One step of the method from `state` (step k − 1 at t0 + (k−1)h) to
+    /// step k at t0 + k·h, in place. On failure the state is left as it was
+    /// and the error names step k and time t0 + k·h.
+    pub fn step(&mut self, state: &mut ParticleState) -> Result<StepReport, ParticleError> {
+        self.check_shape(state)?;
+        let k = state.step + 1;
+        let time = state.t0 + k as f64 * self.h;
+        let (h, half) = (self.h, 0.5 * self.h);
+        let d = self.system.dim();
+        let continued = state.stamp != 0 && state.stamp == self.stamp;
+        if !continued {
+            Self::not_finite(k, time, "q", &state.q)?;
+            Self::not_finite(k, time, "p", &state.p)?;
+        }
+        // p̃ = p0 − (h/2) ∇V(q0), q̃ = q0 + h M⁻¹ p̃.
+        if self.has_potential && !(continued && self.force_stamp == state.stamp) {
+            self.forces(&state.q, k, time)?;
+        }
+        let inv_m = self.system.inverse_masses();
+        for a in 0..inv_m.len() {
+            let w = h * inv_m[a];
+            for c in a * d..(a + 1) * d {
+                let pt = if self.has_potential {
+                    state.p[c] - half * self.force[c]
+                } else {
+                    state.p[c]
+                };
+                self.pn[c] = pt;
+                self.qn[c] = state.q[c] + w * pt;
+            }
+        }
+        let mut report = StepReport::default();
+        // The position stage.
+        self.position_stage(
+            &state.q,
+            state.stamp,
+            continued,
+            1.0 / h,
+            k,
+            time,
+            &mut report,
+        )?;
+        // p′ = p½ − (h/2) ∇V(q1).
+        if self.has_potential {
+            let q1 = std::mem::take(&mut self.qn);
+            let r = self.forces(&q1, k, time);
+            self.qn = q1;
+            r?;
+            for (p, f) in self.pn.iter_mut().zip(&self.force) {
+                *p -= half * f;
+            }
+        }
+        if self.options.method == Method::Rattle && !self.fused() {
+            self.velocity_stage(k, time, &mut report)?;
+        }
+        Self::not_finite(k, time, "p", &self.pn)?;
+        Self::not_finite(k, time, "q", &self.qn)?;
+        std::mem::swap(&mut state.q, &mut self.qn);
+        std::mem::swap(&mut state.p, &mut self.pn);
+        state.step = k;
+        state.time = time;
+        let s = self.new_stamp();
+        state.stamp = s;
+        self.force_stamp = if self.has_potential { s } else { 0 };
+        match &mut self.path {
+            // RATTLE factorised N(q1): the next step's N(q0).
+            Path::Global(g) => {
+                g.factor_stamp = if self.options.method == Method::Rattle {
+                    s
+                } else {
+                    0
+                };
+            }
+            Path::Clusters { nu_stamp, .. } => *nu_stamp = s,
+        }
+        Ok(report)
+    }
+
+    /// Brings initial data onto M and then onto M^H: q ← the point of M
+    /// reached by Newton along M⁻¹ G(q)ᵀ (the fibre direction), then
+    /// p ← p − G(q)ᵀ μ with G(q) M⁻¹ p = 0. p is projected even for SHAKE.
+    /// Errors report step 0 and the state's time.
+    pub fn project(&mut self, state: &mut ParticleState) -> Result<StepReport, ParticleError> {
+        self.check_shape(state)?;
+        let (k, time) = (state.step, state.time);
+        Self::not_finite(k, time, "q", &state.q)?;
+        Self::not_finite(k, time, "p", &state.p)?;
+        self.qn.copy_from_slice(&state.q);
+        self.pn.copy_from_slice(&state.p);
+        let mut report = StepReport::default();
+        self.position_stage(&state.q, 0, false, 0.0, k, time, &mut report)?;
+        self.velocity_stage(k, time, &mut report)?;
+        std::mem::swap(&mut state.q, &mut self.qn);
+        std::mem::swap(&mut state.p, &mut self.pn);
+        state.stamp = 0;
+        Ok(report)
+    }
+
+    /// qn: q̃ → q1 with g(q1) = 0; pn: p̃ → p½ (unless inv_h = 0).
+    #[allow(clippy::too_many_arguments)]
+    fn position_stage(
+        &mut self,
+        q0: &[f64],
+        stamp: u64,
+        continued: bool,
+        inv_h: f64,
+        k: u64,
+        time: f64,
+        report: &mut StepReport,
+    ) -> Result<(), ParticleError> {
+        let args = ClusterArgs {
+            q0,
+            inv_mass: self.system.inverse_masses(),
+            inv_h,
+            tol: self.options.tol,
+            max_iter: self.options.max_iter,
+        };
+        let fuse = self.fused() && inv_h != 0.0;
+        match &mut self.path {
+            Path::Clusters {
+                plans,
+                nu,
+                nu_stamp,
+            } => {
+                let mut rep = ClusterReport::default();
+                // Warm start only along a trajectory (not for projections).
+                let warm = inv_h != 0.0 && continued && *nu_stamp == stamp && stamp != 0;
+                for (f, fam) in self.system.constraint_families().iter().enumerate() {
+                    let (c0, c1) = (self.num.offsets[f], self.num.offsets[f + 1]);
+                    let store = if inv_h != 0.0 {
+                        Some(&mut nu[c0..c1])
+                    } else {
+                        None
+                    };
+                    if let Err(e) = fam.shake_clusters(
+                        &plans[f],
+                        &args,
+                        fuse,
+                        store,
+                        warm,
+                        &mut self.qn,
+                        &mut self.pn,
+                        &mut rep,
+                    ) {
+                        return Err(self.cluster_error(f, e, k, time));
+                    }
+                }
+                report.max_rel_g = rep.max_rel;
+                report.max_hidden = rep.max_hidden;
+                report.newton_iterations = rep.max_iter;
+                report.newton_total = rep.iterations;
+                Ok(())
+            }
+            Path::Global(g) => {
+                let reuse = continued && g.factor_stamp == stamp && stamp != 0;
+                g.position_stage(
+                    &self.system,
+                    &self.num,
+                    &args,
+                    reuse,
+                    &mut self.qn,
+                    &mut self.pn,
+                    k,
+                    time,
+                    report,
+                )
+            }
+        }
+    }
+
+    /// pn ← pn − G(qn)ᵀ μ with G(qn) M⁻¹ pn = 0.
+    fn velocity_stage(
+        &mut self,
+        k: u64,
+        time: f64,
+        report: &mut StepReport,
+    ) -> Result<(), ParticleError> {
+        match &mut self.path {
+            Path::Clusters { plans, .. } => {
+                let mut rep = ClusterReport::default();
+                for (f, fam) in self.system.constraint_families().iter().enumerate() {
+                    if let Err(e) = fam.project_clusters(
+                        &plans[f],
+                        self.system.inverse_masses(),
+                        &self.qn,
+                        &mut self.pn,
+                        &mut rep,
+                    ) {
+                        return Err(self.cluster_error(f, e, k, time));
+                    }
+                }
+                report.max_hidden = rep.max_hidden;
+                Ok(())
+            }
+            Path::Global(g) => g.velocity_stage(
+                &self.system,
+                &self.num,
+                &self.qn,
+                &mut self.pn,
+                k,
+                time,
+                report,
+            ),
+        }
+    }
+}
+
+impl Global {
+    fn new(
+        system: &ParticleSystem,
+        num: &Numbering,
+        comps: &graph::Components,
+        solver: SpdSolver,
+    ) -> Self {
+        let d = system.dim();
+        let m = system.constraints();
+        let fams = system.constraint_families();
+        // Where particle i sits in constraint c's row, and c's gradient block.
+        let block = |c: usize, i: u32| -> u32 {
+            let (f, k) = num.locate(c);
+            let t = fams[f].table();
+            let a = t
+                .particles(k)
+                .iter()
+                .position(|&j| j == i)
+                .expect("touching");
+            (num.grad_offsets[f] + (k * t.arity() + a) * d) as u32
+        };
+        let (mut pos, mut ga, mut gb, mut part) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for i in 0..system.particles() {
+            let cs = &comps.touch[comps.touch_start[i]..comps.touch_start[i + 1]];
+            for (a, &x) in cs.iter().enumerate() {
+                for &y in &cs[..=a] {
+                    let (x, y) = (x as usize, y as usize);
+                    let (r, c) = (x.max(y), x.min(y));
+                    pos.push(solver.position(r, c) as u32);
+                    ga.push(block(x, i as u32));
+                    gb.push(block(y, i as u32));
+                    part.push(i as u32);
+                }
+            }
+        }
+        let ng = *num.grad_offsets.last().unwrap();
+        Global {
+            solver,
+            pos,
+            ga,
+            gb,
+            part,
+            grad0: vec![0.0; ng],
+            grad1: vec![0.0; ng],
+            scale0: vec![0.0; m],
+            scale1: vec![0.0; m],
+            g: vec![0.0; m],
+            nu: vec![0.0; m],
+            delta: vec![0.0; m],
+            factor_stamp: 0,
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        self.solver.bytes()
+            + 4 * (self.pos.capacity()
+                + self.ga.capacity()
+                + self.gb.capacity()
+                + self.part.capacity())
+            + 8 * (self.grad0.capacity()
+                + self.grad1.capacity()
+                + self.scale0.capacity()
+                + self.scale1.capacity()
+                + self.g.capacity()
+                + self.nu.capacity()
+                + self.delta.capacity())
+    }
+
+    /// Gradients and scales at q into (grad, scale); every family.
+    fn gradients(
+        system: &ParticleSystem,
+        num: &Numbering,
+        q: &[f64],
+        g: &mut [f64],
+        grad: &mut [f64],
+        scale: &mut [f64],
+    ) {
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            fam.gradients_scaled(q, &mut g[c0..c1], &mut grad[g0..g1], &mut scale[c0..c1]);
+        }
+    }
+
+    /// N = G W Gᵀ from `grad`, factorised.
+    fn assemble_factor(&mut self, d: usize, inv_m: &[f64], which: u8) -> Result<(), usize> {
+        self.solver.clear();
+        let grad = if which == 0 { &self.grad0 } else { &self.grad1 };
+        let v = self.solver.values_mut();
+        for e in 0..self.pos.len() {
+            let (a, b) = (self.ga[e] as usize, self.gb[e] as usize);
+            let mut dot = 0.0;
+            for c in 0..d {
+                dot += grad[a + c] * grad[b + c];
+            }
+            v[self.pos[e] as usize] += inv_m[self.part[e] as usize] * dot;
+        }
+        self.solver.factor()
+    }
+
+    /// out ← out − factor · W^w Gᵀ x, family by family (monomorphic loops).
+    fn scatter(
+        system: &ParticleSystem,
+        num: &Numbering,
+        grad: &[f64],
+        x: &[f64],
+        weighted: bool,
+        out: &mut [f64],
+        factor: f64,
+    ) {
+        let inv_m = system.inverse_masses();
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            fam.scatter(&grad[g0..g1], &x[c0..c1], inv_m, weighted, factor, out);
+        }
+    }
+
+    fn singular(
+        system: &ParticleSystem,
+        num: &Numbering,
+        pivot: usize,
+        iterations: usize,
+        k: u64,
+        time: f64,
+    ) -> ParticleError {
+        // The sparse solver's pivot is in its own order; name a member of
+        // the system anyway (the pivot's constraint in natural order).
+        let (f, member) = num.locate(pivot.min(system.constraints().saturating_sub(1)));
+        ParticleError::Singular {
+            step: k,
+            time,
+            matrix: "N = G M⁻¹ Gᵀ",
+            iterations,
+            family: system.constraint_families()[f].name().to_string(),
+            member,
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn position_stage(
+        &mut self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        args: &ClusterArgs<'_>,
+        reuse: bool,
+        qn: &mut [f64],
+        pn: &mut [f64],
+        k: u64,
+        time: f64,
+        report: &mut StepReport,
+    ) -> Result<(), ParticleError> {
+        let d = system.dim();
+        let inv_m = system.inverse_masses();
+        if !reuse {
+            Self::gradients(
+                system,
+                num,
+                args.q0,
+                &mut self.g,
+                &mut self.grad0,
+                &mut self.scale0,
+            );
+            self.assemble_factor(d, inv_m, 0)
+                .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
+        }
+        if reuse && args.inv_h != 0.0 {
+            // Warm start along a trajectory: the previous step's ν.
+            Self::scatter(system, num, &self.grad0, &self.nu, true, qn, 1.0);
+        } else {
+            self.nu.fill(0.0);
+        }
+        let tol2 = args.tol * args.tol;
+        let mut it = 0;
+        let mut first = f64::NAN;
+        loop {
+            for (f, fam) in system.constraint_families().iter().enumerate() {
+                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                fam.values(qn, &mut self.g[c0..c1]);
+            }
+            let mut worst = 0.0f64;
+            let mut worst_c = 0;
+            for (c, (&g, &s)) in self.g.iter().zip(&self.scale0).enumerate() {
+                let r = g * g / s;
+                if !(r <= worst) {
+                    worst = r;
+                    worst_c = c;
+                }
+            }
+            if !worst.is_finite() {
+                return Err(ParticleError::NotFinite {
+                    step: k,
+                    time,
+                    what: "constraint",
+                    index: worst_c,
+                });
+            }
+            if worst <= tol2 {
+                report.max_rel_g = worst.sqrt();
+                report.newton_iterations = it;
+                report.newton_total = it as u64;
+                break;
+            }
+            if it == 0 {
+                first = worst;
+            }
+            // A simplified Newton that has grown the residual a millionfold
+            // (squared: 1e12) is diverging: stop before the budget.
+            if it >= args.max_iter || worst > 1e12 * first {
+                let (f, member) = num.locate(worst_c);
+                return Err(ParticleError::NotConverged {
+                    step: k,
+                    time,
+                    residual: worst.sqrt(),
+                    iterations: it,
+                    family: system.constraint_families()[f].name().to_string(),
+                    member,
+                });
+            }
+            // g is re-evaluated next iteration: solve in its buffer.
+            std::mem::swap(&mut self.delta, &mut self.g);
+            self.solver.solve(&mut self.delta);
+            for (n, dl) in self.nu.iter_mut().zip(&self.delta) {
+                *n += dl;
+            }
+            // G(q0) recomputed, not streamed from grad0 (see scatter_at).
+            let inv_m = system.inverse_masses();
+            for (f, fam) in system.constraint_families().iter().enumerate() {
+                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                fam.scatter_at(args.q0, &self.delta[c0..c1], inv_m, true, 1.0, qn);
+            }
+            it += 1;
+        }
+        if args.inv_h != 0.0 {
+            Self::scatter(system, num, &self.grad0, &self.nu, false, pn, args.inv_h);
+        }
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn velocity_stage(
+        &mut self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        q1: &[f64],
+        pn: &mut [f64],
+        k: u64,
+        time: f64,
+        report: &mut StepReport,
+    ) -> Result<(), ParticleError> {
+        let d = system.dim();
+        let inv_m = system.inverse_masses();
+        Self::gradients(
+            system,
+            num,
+            q1,
+            &mut self.g,
+            &mut self.grad1,
+            &mut self.scale1,
+        );
+        self.assemble_factor(d, inv_m, 1)
+            .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
+        self.hidden(system, num, pn, false);
+        self.solver.solve(&mut self.delta);
+        Self::scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
+        // The hidden residual after projection, relative per member.
+        let worst = self.hidden(system, num, pn, true);
+        report.max_hidden = worst.sqrt();
+        // grad1/scale1 (at q1) become the next step's grad0/scale0.
+        std::mem::swap(&mut self.grad0, &mut self.grad1);
+        std::mem::swap(&mut self.scale0, &mut self.scale1);
+        Ok(())
+    }
+
+    /// delta ← G(q1) W p (grad1); with `ratio`, the largest squared
+    /// relative hidden residual.
+    fn hidden(&mut self, system: &ParticleSystem, num: &Numbering, p: &[f64], ratio: bool) -> f64 {
+        let inv_m = system.inverse_masses();
+        let mut worst = 0.0f64;
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            let w = fam.hidden(
+                &self.grad1[g0..g1],
+                inv_m,
+                p,
+                &mut self.delta[c0..c1],
+                ratio,
+            );
+            worst = worst.max(w);
+        }
+        worst
+    }
+}
