@@ -51,7 +51,7 @@ modify_time() {
 }
 
 echo "machine: $(lscpu | sed -n 's/^Model name: *//p'), $(nproc) cores; load: $(uptime | sed 's/.*load average: //')"
-echo "LAMMPS: $(lmp -h 2>/dev/null | sed -n 's/^Large-scale.*- \(.*\)$/\1/p' | head -1)"
+echo "LAMMPS: $(lmp -h 2>/dev/null | sed -n 's/^Large-scale[^-]*- //p' | head -1)"
 echo
 echo "| waters | constraints | code | ns / constraint / step | max relative length error | max relative velocity residual |"
 echo "|---|---|---|---|---|---|"
