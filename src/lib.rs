@@ -36,7 +36,7 @@
 //! // t = 0, bob beside the pivot (at y = 0.1) and at rest; p_t is free.
 //! let z0 = rattle.project_to_hidden(&State::from_slices(&[0.0, 1.0, 0.1], &[0.0; 3]))?;
 //! let out = rattle.run(z0, Stop::Steps(100)).execute();
-//! let z = out.trajectory.states.last().unwrap();
+//! let z = out.trajectory.last().unwrap();
 //! assert!((z.q[0] - 1.0).abs() < 1e-12); // q₀ is the time: 100 steps of 0.01
 //! # Ok(())
 //! # }

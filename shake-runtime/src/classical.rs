@@ -257,7 +257,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
         // An update at round-off; or a contraction that proves the next
         // one would be (the remaining error of a linear iteration with
         // ratio θ is at most θ/(1−θ) times the last update).
-        if step <= tol || (iterations > 1 && theta < 0.5 && theta / (1.0 - theta) * step <= tol) {
+        if step <= tol {
             break;
         }
         // The noise floor, seen with a Jacobian of this iterate (or after

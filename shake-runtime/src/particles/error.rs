@@ -37,6 +37,30 @@ pub enum ParticleError {
         /// n·D.
         expected: usize,
     },
+    /// An option is out of its range (a tolerance not in (0, 1), an
+    /// iteration budget of 0).
+    #[error("option {what} = {value} is not allowed: {why}")]
+    InvalidOption {
+        /// The option.
+        what: &'static str,
+        /// The value given.
+        value: f64,
+        /// Its range.
+        why: &'static str,
+    },
+    /// The trajectory a run was asked to store does not fit in memory (or
+    /// its size does not fit in a machine word): refused before any step.
+    #[error(
+        "step {step}: storing {states} states of {dof} coordinates each does not fit in memory"
+    )]
+    Storage {
+        /// The step the run starts from.
+        step: u64,
+        /// States the run would store.
+        states: u64,
+        /// n·D.
+        dof: usize,
+    },
     /// A forced solver cannot take this constraint graph.
     #[error("the {solver} solver cannot take this constraint graph: {why}")]
     Solver {

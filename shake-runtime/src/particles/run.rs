@@ -66,10 +66,28 @@ impl Rattle {
         let mut summary = RunSummary::default();
         if let Some(s) = std::num::NonZeroU64::new(stride) {
             let first = state.step;
-            let last = first + steps;
             let at_start = first.is_multiple_of(s.get());
-            let stored = (last / s - first / s) as usize + usize::from(at_start);
-            trajectory.reserve(stored);
+            // Reserved up front (no allocation per step); a request that
+            // cannot be stored is a typed error before the first step, not
+            // an abort of the process after hours.
+            let stored = first
+                .checked_add(steps)
+                .map(|last| last / s - first / s + u64::from(at_start));
+            let room = match stored {
+                Some(n) => trajectory.try_reserve(n).is_ok(),
+                None => false,
+            };
+            if !room {
+                return RunOutcome {
+                    trajectory,
+                    summary,
+                    error: Some(ParticleError::Storage {
+                        step: first,
+                        states: stored.unwrap_or(u64::MAX),
+                        dof: state.q.len(),
+                    }),
+                };
+            }
             if at_start {
                 trajectory.push(state);
             }

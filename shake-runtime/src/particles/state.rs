@@ -114,10 +114,14 @@ impl Trajectory {
         }
     }
 
-    pub(crate) fn reserve(&mut self, states: usize) {
-        self.data.reserve_exact(states * 2 * self.d);
-        self.steps.reserve_exact(states);
-        self.times.reserve_exact(states);
+    /// Room for `states` more states; `Err` (and nothing reserved beyond
+    /// what fit) when their size overflows or the allocator refuses.
+    pub(crate) fn try_reserve(&mut self, states: u64) -> Result<(), ()> {
+        let states = usize::try_from(states).map_err(|_| ())?;
+        let numbers = states.checked_mul(2 * self.d).ok_or(())?;
+        self.data.try_reserve_exact(numbers).map_err(|_| ())?;
+        self.steps.try_reserve_exact(states).map_err(|_| ())?;
+        self.times.try_reserve_exact(states).map_err(|_| ())
     }
 
     pub(crate) fn push(&mut self, s: &ParticleState) {
