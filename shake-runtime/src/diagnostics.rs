@@ -4,7 +4,16 @@
 //! every stored or observed state comes with a [`DiagnosticRecord`]: the
 //! energy H, the residuals |g| and |{g,H}| of that state, and summaries of
 //! the steps since the previous record (Newton iterations, ‖λ‖, and the
-//! condition of N). The per-step summaries are a few comparisons per step;
+//! condition of N), and the multipliers of every recorded state, λ of the
+//! SHAKE step leaving it and σ of the projection that gave it (kept beside
+//! the records in the trajectory, m of each per record:
+//! [`Trajectory::lambda`](crate::Trajectory::lambda),
+//! [`Trajectory::sigma`](crate::Trajectory::sigma), and the constraint
+//! force from them, [`Trajectory::constraint_force`](crate::Trajectory::constraint_force)).
+//! Sign convention of the paper: q' = H_p + g_pᵀλ, p' = −H_q − g_qᵀλ; the
+//! library's λ, σ are fibre parameters (impulses), for holonomic g and
+//! Störmer–Verlet (h/2) times the classical multipliers of Section 5.1.3.
+//! The per-step summaries are a few comparisons per step;
 //! the residuals cost one evaluation of g, {g,H} and H per record. With
 //! diagnostics off none of this is computed.
 

@@ -109,8 +109,9 @@ use crate::diagnostics::DiagnosticRecord;
 use crate::error::{SolveError, Stage, StepError};
 use crate::integrator::Trajectory;
 
-/// The first word of every packed record ("SHAKE", version 1).
-const RECORD_TAG: u64 = 0x5348_414b_4501;
+/// The first word of every packed record ("SHAKE", version 2: with the
+/// multipliers λ, σ of each diagnostic record).
+const RECORD_TAG: u64 = 0x5348_414b_4502;
 /// Words of one packed [`DiagnosticRecord`].
 const DIAGNOSTIC_WORDS: usize = 10;
 
@@ -151,9 +152,10 @@ pub enum RecordError {
 /// record: u64 words, floats as their IEEE bits (so a record read back is
 /// bit for bit the outcome, NaN payloads and signed zeros included).
 ///
-/// Layout: tag, member, record length, d, n stored states, n diagnostics;
-/// the n steps; the n times; the n states (q then p, 2d words each); the
-/// diagnostics (10 words each); the error (a variant code, 0 for none, and
+/// Layout: tag, member, record length, d, n stored states, n diagnostics,
+/// m constraints; t0, h, stride; the n steps; the n times; the n states (q
+/// then p, 2d words each); the diagnostics (10 words each, then the
+/// record's m multipliers λ and m multipliers σ); the error (a variant code, 0 for none, and
 /// its fields; message strings as a byte count and the bytes). This is the
 /// one place that knows how a [`RunOutcome`] is laid out in memory.
 ///
@@ -180,6 +182,7 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
         d as u64,
         n as u64,
         traj.diagnostics.len() as u64,
+        traj.constraints() as u64,
         t0.to_bits(),
         h.to_bits(),
         stride,
@@ -189,7 +192,9 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
     for i in 0..n {
         words.extend(traj.q(i).iter().chain(traj.p(i)).map(|x| x.to_bits()));
     }
-    for r in &traj.diagnostics {
+    let m = traj.constraints();
+    let multipliers = traj.multiplier_words();
+    for (i, r) in traj.diagnostics.iter().enumerate() {
         words.extend([
             r.step,
             r.t.to_bits(),
@@ -202,6 +207,11 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
             r.max_lambda.to_bits(),
             r.max_condition.to_bits(),
         ]);
+        words.extend(
+            multipliers[2 * m * i..2 * m * (i + 1)]
+                .iter()
+                .map(|x| x.to_bits()),
+        );
     }
     pack_error(out.error.as_ref(), words);
     words[start + 2] = (words.len() - start) as u64;
@@ -251,6 +261,7 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
             value: n_diag as u64,
         });
     }
+    let m = r.count("constraints")?;
     let t0 = f64::from_bits(r.word()?);
     let h = f64::from_bits(r.word()?);
     let stride = r.word()?;
@@ -279,6 +290,7 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
         }
     }
     let mut diagnostics = Vec::with_capacity(n_diag);
+    let mut multipliers = Vec::new();
     for _ in 0..n_diag {
         let w = r.slice(DIAGNOSTIC_WORDS)?;
         let f = |i: usize| f64::from_bits(w[i]);
@@ -294,6 +306,8 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
             max_lambda: f(8),
             max_condition: f(9),
         });
+        let w = r.slice(2 * m)?;
+        multipliers.extend(w.iter().map(|&x| f64::from_bits(x)));
     }
     let error = unpack_error(&mut r)?;
     if r.at != len {
@@ -303,6 +317,7 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
         });
     }
     trajectory.diagnostics = diagnostics;
+    trajectory.set_multipliers(m, multipliers);
     Ok((member, RunOutcome { trajectory, error }, len))
 }
 

@@ -248,6 +248,9 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     checked_det: f64,
     /// ‖N‖₁ at the result of the last substep.
     last_norm: f64,
+    /// λ of the first substep of the last composed step (kept only with
+    /// diagnostics): the multiplier of the step leaving the state.
+    lead_lambda: Vec<f64>,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -287,6 +290,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             checked_norm: f64::NAN,
             checked_det: f64::NAN,
             last_norm: f64::NAN,
+            lead_lambda: vec![0.0; S::CONSTRAINTS],
         }
     }
 
@@ -612,6 +616,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let mut total = StepInfo::default();
         for (k, &gamma) in gammas.iter().enumerate() {
             let info = self.substep(q, p, gamma * self.h, project || k < last, step, t)?;
+            if k == 0 && self.diagnostics {
+                self.lead_lambda.copy_from_slice(&self.ws.lambda);
+            }
             total.shake_iterations += info.shake_iterations;
             total.base_iterations += info.base_iterations;
             total.rattle_iterations += info.rattle_iterations;
@@ -1049,6 +1056,27 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
     }
 
+    /// With diagnostics, after the step leaving the last recorded state:
+    /// writes that step's λ (of its first substep) into the record. A
+    /// RATTLE run that projects only the states it records stepped from
+    /// the SHAKE state z⁻, so its λ also carries the projection's σ (same
+    /// fibre, same point: the parameters add); σ is taken off so that the
+    /// record's λ is RATTLE's, from the state on M^H.
+    fn fill_leaving_lambda(&mut self, traj: &mut Trajectory, per_step: bool) {
+        let m = S::CONSTRAINTS;
+        let lead = if self.composition.stages() == 1 {
+            &self.ws.lambda
+        } else {
+            &self.lead_lambda
+        };
+        let subtract = self.method == Method::Rattle && !per_step;
+        if let Some((lambda, sigma)) = traj.last_multipliers_mut() {
+            for j in 0..m {
+                lambda[j] = lead[j] - if subtract { sigma[j] } else { 0.0 };
+            }
+        }
+    }
+
     /// Stores (and shows to the observer) the state (q, p) at step k.
     #[allow(clippy::too_many_arguments)]
     fn record<F: FnMut(u64, f64, &State)>(
@@ -1136,6 +1164,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 max_lambda: acc.lambda,
                 max_condition: acc.condition,
             });
+            // σ: the projection that gave this state, done just now or
+            // (projected) by the last substep; λ is known only once the
+            // step leaving the state is taken (`execute` fills it in).
+            traj.push_multipliers(
+                (self.method == Method::Rattle).then_some(self.ws.sigma.as_slice()),
+            );
             *acc = Accumulator::default();
         }
         observer(k, t, scratch);
@@ -1318,6 +1352,10 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             0
         };
         traj = Trajectory::new(S::DOF, t0, h, stride, capacity);
+        if integ.diagnostics {
+            traj.set_constraints(S::CONSTRAINTS);
+            traj.reserve_multipliers(capacity);
+        }
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
         let mut p: Vec<f64> = z0.p.as_slice().to_vec();
         let mut prev_q = q.clone();
@@ -1366,7 +1404,12 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             prev_q.copy_from_slice(&q);
             prev_p.copy_from_slice(&p);
             match integ.advance(&mut q, &mut p, per_step, k, t_prev) {
-                Ok(info) => acc.add(&info),
+                Ok(info) => {
+                    acc.add(&info);
+                    if integ.diagnostics && last_recorded == k - 1 {
+                        integ.fill_leaving_lambda(&mut traj, per_step);
+                    }
+                }
                 Err(e) => {
                     if last_recorded != k - 1 {
                         // The last good state; if even its projection fails, the

@@ -42,6 +42,7 @@
 //! - [`fibre`]: the fibre flows exp(Σ λ_i X_{g_i}), exact to round-off.
 //! - [`newton`]: every implicit equation is solved to round-off.
 //! - [`diagnostics`] and [`error`]: what a run measures, and how it fails.
+//! - [`io`]: a trajectory as CSV and back.
 #![warn(missing_docs)]
 // Numerical kernels index several arrays with one loop variable, as the
 // formulas do; iterator chains would hide them.
@@ -62,6 +63,7 @@ pub mod error;
 pub mod examples;
 pub mod fibre;
 pub mod integrator;
+pub mod io;
 mod linalg;
 pub mod newton;
 pub mod particles;

@@ -26,7 +26,7 @@ use crate::state::State;
 /// assert_eq!(traj.q(0), &[0.0, -1.0]);
 /// assert_eq!(traj.state(0).p[0], 0.5);
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Trajectory {
     /// d: each state is 2d numbers, q then p.
     dof: usize,
@@ -41,6 +41,32 @@ pub struct Trajectory {
     extra: Option<u64>,
     /// Diagnostics, one per state, when enabled (empty otherwise).
     pub diagnostics: Vec<DiagnosticRecord>,
+    /// m, the number of constraints (the multipliers per record are 2m).
+    constraints: usize,
+    /// With the diagnostics: per record λ (m numbers) then σ (m numbers).
+    multipliers: Vec<f64>,
+}
+
+/// Equal when every field is; the multipliers compare bit for bit (the
+/// last state's λ is NaN, see [`Trajectory::lambda`]).
+impl PartialEq for Trajectory {
+    fn eq(&self, other: &Self) -> bool {
+        self.dof == other.dof
+            && self.data == other.data
+            && self.t0.to_bits() == other.t0.to_bits()
+            && self.h.to_bits() == other.h.to_bits()
+            && self.stride == other.stride
+            && self.regular == other.regular
+            && self.extra == other.extra
+            && self.diagnostics == other.diagnostics
+            && self.constraints == other.constraints
+            && self.multipliers.len() == other.multipliers.len()
+            && self
+                .multipliers
+                .iter()
+                .zip(&other.multipliers)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
 }
 
 /// No state, d = 0, t0 = 0, h = 0, stride 1 (the stride a run clamps to).
@@ -63,7 +89,161 @@ impl Trajectory {
             regular: 0,
             extra: None,
             diagnostics: Vec::new(),
+            constraints: 0,
+            multipliers: Vec::new(),
         }
+    }
+
+    /// m, the number of constraints whose multipliers the diagnostics hold.
+    pub(crate) fn set_constraints(&mut self, m: usize) {
+        self.constraints = m;
+    }
+
+    /// The number m of constraints, i.e. of multipliers λ (and of σ) per
+    /// diagnostic record (0 when the run had no diagnostics).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+    /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
+    /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(2)).execute().trajectory;
+    /// assert_eq!(traj.constraints(), 1);
+    /// ```
+    pub fn constraints(&self) -> usize {
+        self.constraints
+    }
+
+    /// Room for the multipliers of `records` diagnostic records.
+    pub(crate) fn reserve_multipliers(&mut self, records: usize) {
+        self.multipliers.reserve(2 * self.constraints * records);
+    }
+
+    /// Appends the multipliers of the next diagnostic record: λ unknown
+    /// yet (NaN until the step leaving the state fills it in), then σ
+    /// (zeros for SHAKE, `None`).
+    pub(crate) fn push_multipliers(&mut self, sigma: Option<&[f64]>) {
+        let m = self.constraints;
+        self.multipliers.extend(std::iter::repeat_n(f64::NAN, m));
+        match sigma {
+            Some(s) => self.multipliers.extend_from_slice(&s[..m]),
+            None => self.multipliers.extend(std::iter::repeat_n(0.0, m)),
+        }
+    }
+
+    /// λ (to fill in) and σ of the last diagnostic record.
+    pub(crate) fn last_multipliers_mut(&mut self) -> Option<(&mut [f64], &[f64])> {
+        let m = self.constraints;
+        let n = self.multipliers.len();
+        if m == 0 || n < 2 * m {
+            return None;
+        }
+        let (lambda, sigma) = self.multipliers[n - 2 * m..].split_at_mut(m);
+        Some((lambda, sigma))
+    }
+
+    /// Replaces every multiplier (unpacking): λ then σ per record.
+    pub(crate) fn set_multipliers(&mut self, m: usize, words: Vec<f64>) {
+        self.constraints = m;
+        self.multipliers = words;
+    }
+
+    /// Every multiplier, record after record (λ then σ, m each).
+    pub(crate) fn multiplier_words(&self) -> &[f64] {
+        &self.multipliers
+    }
+
+    /// λ at diagnostic record `i` (panics when `i` is out of range or the
+    /// run had no diagnostics): the fibre parameters of the SHAKE step
+    /// *leaving* the state, y = exp(Σ λ_j X_{g_j})(z), as RATTLE takes it
+    /// from the state on M^H (the first substep of a composed step). The
+    /// library's λ is the fibre parameter itself, an impulse: for holonomic
+    /// g and Störmer–Verlet the step's first half kick is
+    /// p ← p − (h/2)(H_q + g_qᵀ λ_c) with the paper's λ_c (Section 5.1.3),
+    /// so λ = (h/2) λ_c. No step leaves the last state of a run: its λ is
+    /// NaN, never a made-up number.
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).with_diagnostics();
+    /// // At rest at the bottom the rod pulls up: λ > 0 (p ← p − 2λq, q = (0, −1)).
+    /// let traj = i.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(3)).execute().trajectory;
+    /// assert!(traj.lambda(0)[0] > 0.0);
+    /// assert!(traj.lambda(3)[0].is_nan());
+    /// ```
+    pub fn lambda(&self, i: usize) -> &[f64] {
+        let m = self.constraints;
+        &self.multipliers[2 * m * i..2 * m * i + m]
+    }
+
+    /// σ at diagnostic record `i` (panics when out of range): the fibre
+    /// parameters of RATTLE's projection Π onto M^H that gave this state,
+    /// exp(Σ σ_j X_{g_j})(z⁻) ∈ M^H, z⁻ the SHAKE state of the step
+    /// arriving (0 for SHAKE, which does not project). For holonomic g and
+    /// Störmer–Verlet this is the step's last half kick,
+    /// p ← p − (h/2)(H_q + g_qᵀ μ_c) at the new q, so σ = (h/2) μ_c.
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).with_diagnostics();
+    /// let traj = i.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(3)).execute().trajectory;
+    /// assert!(traj.sigma(1)[0] > 0.0);
+    /// ```
+    pub fn sigma(&self, i: usize) -> &[f64] {
+        let m = self.constraints;
+        &self.multipliers[2 * m * i + m..2 * m * (i + 1)]
+    }
+
+    /// The constraint force at stored state `i`, f = −g_q(q)ᵀ λ_c, one
+    /// number per coordinate, in the paper's sign convention
+    /// (q' = H_p + g_pᵀλ, p' = −H_q − g_qᵀλ), written into `force`
+    /// (length d). The multiplier is the whole impulse the constraints give
+    /// at this q divided by h: λ_c = (σ + λ)/h, the last half kick of the
+    /// step arriving plus the first half kick of the step leaving
+    /// (for SHAKE σ = 0 and λ is all of it). Each half alone is off the
+    /// exact multiplier by O(h), with opposite signs; the symmetric sum is
+    /// O(h²) for a symmetric second-order base map (Störmer–Verlet,
+    /// implicit midpoint): `tests/constraint_forces.rs` shows the error
+    /// ratio 4 when h is halved on the pendulum. g_q is evaluated with the
+    /// system's `constraint_jacobian` at the stored state (for constraints
+    /// that depend on p, −g_qᵀλ_c is the force on p and g_pᵀλ_c the
+    /// correction of q'). Returns `false` (and leaves `force` as NaN) at
+    /// the first state, where no step arrives (only the half kick λ
+    /// leaving it is known; 2λ/h is then the O(h) estimate), and at the
+    /// last, where no step leaves (λ is NaN).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let pendulum = Pendulum { gravity: 9.81, length: 1.0 };
+    /// let mut i = Integrator::new(pendulum, StormerVerlet, 1e-3).with_diagnostics();
+    /// // At rest at the bottom: the tension is m g = 9.81, pointing up.
+    /// let traj = i.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(2)).execute().trajectory;
+    /// let mut f = [0.0; 2];
+    /// assert!(!traj.constraint_force(&pendulum, 0, &mut f)); // no step arrives
+    /// assert!(traj.constraint_force(&pendulum, 1, &mut f));
+    /// assert!(f[0].abs() < 1e-12 && (f[1] - 9.81).abs() < 1e-4);
+    /// ```
+    pub fn constraint_force<S: crate::ConstrainedSystem>(
+        &self,
+        system: &S,
+        i: usize,
+        force: &mut [f64],
+    ) -> bool {
+        let (d, m) = (self.dof, self.constraints);
+        assert_eq!(force.len(), d, "force has one entry per coordinate");
+        let (lambda, sigma) = (self.lambda(i), self.sigma(i));
+        if i == 0 || !lambda.iter().chain(sigma).all(|x| x.is_finite()) {
+            force.fill(f64::NAN);
+            return false;
+        }
+        let mut g_z = vec![0.0; m * 2 * d];
+        system.constraint_jacobian(self.q(i), self.p(i), &mut g_z);
+        force.fill(0.0);
+        for j in 0..m {
+            let c = (lambda[j] + sigma[j]) / self.h;
+            for k in 0..d {
+                force[k] -= g_z[j + k * m] * c;
+            }
+        }
+        true
     }
 
     /// (d, t0, h, stride): what, with the stored step indices, fixes every
