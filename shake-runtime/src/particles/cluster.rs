@@ -837,12 +837,15 @@ fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX: usize>(
     let parts: &[u32; NP] = plan.particles[p0..p0 + NP].try_into().unwrap();
     let slots = &plan.slots[m0 * ar..(m0 + MC) * ar];
     let mut sl = [[0usize; FX]; MC];
+    let mut changed = false;
     for j in 0..MC {
         for a in 0..ar {
             sl[j][a] = (slots[j * ar + a] as usize).min(NP - 1);
+            changed |= sl[j][a] != f.sl[j][a];
         }
     }
-    if sl != f.sl {
+    // (An unrolled comparison: `sl != f.sl` became a call to memcmp.)
+    if changed {
         f.sl = sl;
         f.wg0d = [[0.0; NX]; MC];
         f.grd = [[0.0; NX]; MC];
