@@ -190,8 +190,10 @@ impl Rattle {
             c => c,
         };
         let path = if choice == SolverChoice::Clusters {
+            let mut plans = comps.cluster_plans(&system, &num);
+            plans.iter_mut().for_each(FamilyClusters::detect_shape);
             Path::Clusters {
-                plans: comps.cluster_plans(&system, &num),
+                plans,
                 nu: vec![0.0; m],
                 nu_stamp: 0,
             }
@@ -248,6 +250,24 @@ impl Rattle {
     /// The options.
     pub fn options(&self) -> &Options {
         &self.options
+    }
+
+    /// Makes the cluster path use its general kernel (any cluster shape,
+    /// run-time sizes) even where a fixed-size kernel applies (every
+    /// cluster of a family with the same small shape, e.g. rigid water).
+    /// Both give the same steps to round-off; this exists to compare them
+    /// (tests, benchmarks). No effect on the coupled paths.
+    ///
+    /// ```
+    /// use shake_runtime::particles::{generate, Options, Rattle};
+    /// let (system, _) = generate::water(2, 1).unwrap();
+    /// let mut rattle = Rattle::new(system, 1e-3, Options::default()).unwrap();
+    /// rattle.use_general_cluster_kernel();
+    /// ```
+    pub fn use_general_cluster_kernel(&mut self) {
+        if let Path::Clusters { plans, .. } = &mut self.path {
+            plans.iter_mut().for_each(|p| p.fixed = None);
+        }
     }
 
     /// Independent clusters on the cluster path (1 on the coupled path).
