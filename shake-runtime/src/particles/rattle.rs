@@ -169,8 +169,22 @@ impl Rattle {
     /// constraints than coordinates, and a forced solver that cannot take
     /// the graph.
     pub fn new(system: ParticleSystem, h: f64, options: Options) -> Result<Self, ParticleError> {
-        if !(h.is_finite() && h > 0.0) {
+        if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
             return Err(ParticleError::StepSize { h });
+        }
+        if !(options.tol > 0.0 && options.tol < 1.0) {
+            return Err(ParticleError::InvalidOption {
+                what: "tol",
+                value: options.tol,
+                why: "the relative residual tolerance must lie in (0, 1)",
+            });
+        }
+        if options.max_iter == 0 {
+            return Err(ParticleError::InvalidOption {
+                what: "max_iter",
+                value: 0.0,
+                why: "at least one Newton iteration is needed",
+            });
         }
         let num = Numbering::new(&system);
         let comps = graph::components(&system, &num)?;
@@ -404,6 +418,9 @@ impl Rattle {
         let (h, half) = (self.h, 0.5 * self.h);
         let d = self.system.dim();
         let continued = state.stamp != 0 && state.stamp == self.stamp;
+        // The caches (N's factor, ν, forces) are about to be overwritten: a
+        // step that fails half-way must not leave them claiming a state.
+        self.stamp = 0;
         if !continued {
             Self::not_finite(k, time, "q", &state.q)?;
             Self::not_finite(k, time, "p", &state.p)?;
@@ -478,6 +495,10 @@ impl Rattle {
     /// Errors report step 0 and the state's time.
     pub fn project(&mut self, state: &mut ParticleState) -> Result<StepReport, ParticleError> {
         self.check_shape(state)?;
+        // The projection overwrites N's factor, G and ν: no state may count
+        // as "continued" afterwards (a step of another state would reuse
+        // this one's factor: found by the hostile review).
+        self.stamp = 0;
         let (k, time) = (state.step, state.time);
         Self::not_finite(k, time, "q", &state.q)?;
         Self::not_finite(k, time, "p", &state.p)?;
@@ -773,7 +794,6 @@ impl Global {
         } else {
             self.nu.fill(0.0);
         }
-        let tol2 = args.tol * args.tol;
         let mut it = 0;
         let mut first = f64::NAN;
         loop {
@@ -784,7 +804,9 @@ impl Global {
             let mut worst = 0.0f64;
             let mut worst_c = 0;
             for (c, (&g, &s)) in self.g.iter().zip(&self.scale0).enumerate() {
-                let r = g * g / s;
+                // |g| / scale, not g² / scale²: squares underflow at length
+                // scales below ~1e-77 and Newton would "converge" at once.
+                let r = g.abs() / s;
                 if !(r <= worst) {
                     worst = r;
                     worst_c = c;
@@ -798,8 +820,8 @@ impl Global {
                     index: worst_c,
                 });
             }
-            if worst <= tol2 {
-                report.max_rel_g = worst.sqrt();
+            if worst <= args.tol {
+                report.max_rel_g = worst;
                 report.newton_iterations = it;
                 report.newton_total = it as u64;
                 break;
@@ -808,13 +830,13 @@ impl Global {
                 first = worst;
             }
             // A simplified Newton that has grown the residual a millionfold
-            // (squared: 1e12) is diverging: stop before the budget.
-            if it >= args.max_iter || worst > 1e12 * first {
+            // is diverging: stop before the budget.
+            if it >= args.max_iter || worst > 1e6 * first {
                 let (f, member) = num.locate(worst_c);
                 return Err(ParticleError::NotConverged {
                     step: k,
                     time,
-                    residual: worst.sqrt(),
+                    residual: worst,
                     iterations: it,
                     family: system.constraint_families()[f].name().to_string(),
                     member,

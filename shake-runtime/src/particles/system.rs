@@ -17,10 +17,10 @@ pub trait ConstraintFamily: Send + Sync {
     /// particles into `grad` (`arity * dim` entries per member, member after
     /// member, in the layout of [`Stencil`]).
     fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]);
-    /// As [`gradients`](Self::gradients), and the squared residual scale
-    /// |∇g_k|² · extent_k² of every member into `scale2` (extent² =
+    /// As [`gradients`](Self::gradients), and the residual scale
+    /// |∇g_k| · extent_k of every member into `scale2` (extent² =
     /// Σ_a |x_a − x̄|² over the member's particles, |x_a|² for one particle):
-    /// the relative residual of member k is |g_k| / √scale2_k.
+    /// the relative residual of member k is |g_k| / scale2_k.
     fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]);
     /// out ← out − factor · W^w Gᵀ x over this family's members: every
     /// member k's gradient block (in `grad`, the layout of
@@ -161,8 +161,10 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
             self.gather(q, k, x);
             let gr = &mut grad[k * w..(k + 1) * w];
             g[k] = self.stencil.gradient(x, self.table.data(k), gr);
+            // Each factor's square root separately: their product stays
+            // representable down to length scales of ~1e-150.
             let n2: f64 = gr.iter().map(|v| v * v).sum();
-            scale2[k] = (n2 * cluster::extent2::<S>(x)).max(f64::MIN_POSITIVE);
+            scale2[k] = (n2.sqrt() * cluster::extent2::<S>(x).sqrt()).max(f64::MIN_POSITIVE);
         }
     }
     fn scatter(
