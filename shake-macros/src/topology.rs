@@ -400,6 +400,17 @@ impl Template<'_> {
                     }
                     (BinOp::Pow, Val::S(x), Val::S(y)) => match self.graph.as_const(y) {
                         Some(r) if r.is_finite() => {
+                            if r.abs() > crate::simplify::MAX_EXPONENT as f64 {
+                                return Err(err(
+                                    b.span,
+                                    format!(
+                                        "exponent too large: |{r}| is above the limit of {} \
+                                         (x^n over- or underflows f64 for every |x| outside \
+                                         [0.5, 2] there)",
+                                        crate::simplify::MAX_EXPONENT
+                                    ),
+                                ));
+                            }
                             if self.graph.is_zero(x) && r < 0.0 {
                                 return Err(err(e.span, "division by zero: 0 to a negative power"));
                             }
@@ -705,12 +716,14 @@ fn check_declaration(def: &ParticleDef) -> Vec<Error> {
                 local.insert(name, id.span());
             }
         }
-        let local_dim = f.particles.len() * def.dim;
-        if local_dim > MAX_LOCAL {
+        // Checked: a DIM near usize::MAX must not wrap past the limit.
+        let local_dim = f.particles.len().checked_mul(def.dim);
+        if local_dim.is_none_or(|n| n > MAX_LOCAL) {
+            let shown = local_dim.map_or("more than 2^64".to_string(), |n| n.to_string());
             errors.push(err(
                 f.table.span(),
                 format!(
-                    "a member of `{}` touches {} particles in R^{}: {local_dim} local \
+                    "a member of `{}` touches {} particles in R^{}: {shown} local \
                      coordinates, more than the runtime's limit of {MAX_LOCAL} (ARITY·DIM)",
                     f.name,
                     f.particles.len(),
@@ -1142,6 +1155,21 @@ mod tests {
                  constraints { c[k in t(a, b)]: norm2(x[a] - x[b]) - 1 } }"
                     .to_string(),
                 "`a` is declared twice",
+            ),
+            // ARITY·DIM computed with a checked product (it wrapped to 0
+            // and rustc ran out of memory on the emitted arrays).
+            (
+                "struct S { particles x[9223372036854775808]; \
+                 constraints { c[k in t(a, b; l)]: x[a][0] - x[b][0] - l } }"
+                    .to_string(),
+                "more than 2^64 local coordinates",
+            ),
+            // The exponent limit of the compile-time form holds here too.
+            (
+                "struct S { particles x[3]; \
+                 constraints { c[k in t(a, b; l)]: norm2(x[a] - x[b])^100000 - l } }"
+                    .to_string(),
+                "exponent too large",
             ),
         ];
         for (src, msg) in cases {
