@@ -299,7 +299,7 @@ fn max_rel_velocity(table: &Table, inverse_masses: &[f64], state: &ParticleState
             vv += v * v;
         }
         let e = rv.abs() / (rr * vv).sqrt().max(f64::MIN_POSITIVE);
-        if !(e <= worst) {
+        if e.is_nan() || e > worst {
             worst = e;
         }
     }
