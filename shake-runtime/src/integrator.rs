@@ -697,6 +697,28 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         // huge λ with g ≠ 0. Such a state is refused here: a step never
         // returns a point off M. (NaN-propagating maximum.)
         self.system.constraints(q, p, &mut self.ws.g);
+        self.guard_shake_result(q, p, &report, &mut info, project, step, t, h)?;
+        Ok(info)
+    }
+
+    /// The guard after SHAKE, the same on both paths: g(z1) within the
+    /// constraint tolerance (Newton stops on its updates, so far outside
+    /// its basin it can stop off M), N's condition and the sign of det N
+    /// (a component jump), and the size of λ against its linear prediction
+    /// (a fibre jump). `self.ws.g` holds g at the new state.
+    #[allow(clippy::too_many_arguments)]
+    fn guard_shake_result(
+        &mut self,
+        q: &[f64],
+        p: &[f64],
+        report: &crate::shake::ShakeReport,
+        info: &mut StepInfo,
+        project: bool,
+        step: u64,
+        t: f64,
+        h: f64,
+    ) -> Result<(), StepError> {
+        let opts = &self.options;
         let residual = self.ws.g.iter().fold(0.0f64, |a, x| {
             if x.is_nan() || x.abs() > a {
                 x.abs()
@@ -748,7 +770,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             h,
         )
         .map_err(|e| e.at(step, t))?;
-        Ok(info)
+        Ok(())
     }
 
     /// [`substep`](Self::substep) on the classical path (see `classical`):
@@ -797,57 +819,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         // g at the new state was the last residual of SHAKE's iteration
         // (the state is z0 + Δ, rounded once more by the addition).
-        let residual = self.ws.g.iter().fold(0.0f64, |a, x| {
-            if x.is_nan() || x.abs() > a {
-                x.abs()
-            } else {
-                a
-            }
-        });
-        if !(residual <= opts.constraint_tolerance) {
-            return Err(StepError::NewtonNotConverged {
-                stage: Stage::Shake,
-                step,
-                t,
-                source: SolveError::NotConverged {
-                    iterations: report.iterations,
-                    residual,
-                },
-            });
-        }
-        let nd = check_nondegeneracy(&self.system, q, p, &mut self.ws);
-        info.condition = nd.condition(self.reference_norm);
-        info.det_n = nd.det;
-        if !(info.condition <= opts.max_condition) {
-            return Err(StepError::NondegeneracyLost {
-                stage: if project { Stage::Rattle } else { Stage::Shake },
-                step,
-                t,
-                condition: info.condition,
-                limit: opts.max_condition,
-            });
-        }
-        if opts.check_component
-            && self.det_prev.is_finite()
-            && nd.det.signum() != self.det_prev.signum()
-        {
-            return Err(StepError::ComponentJump {
-                step,
-                t,
-                det_before: self.det_prev,
-                det_after: nd.det,
-            });
-        }
-        self.det_prev = nd.det;
-        self.last_norm = nd.norm;
-        opts.check_jump(
-            Stage::Shake,
-            report.lambda_correction,
-            report.lambda_predicted,
-            report.lambda,
-            h,
-        )
-        .map_err(|e| e.at(step, t))?;
+        self.guard_shake_result(q, p, &report, &mut info, project, step, t, h)?;
         self.n_fresh = true;
         if project {
             // Linear in σ: one solve, no second root to jump to.
