@@ -57,6 +57,7 @@
 mod cluster;
 mod error;
 pub mod generate;
+mod global;
 mod graph;
 mod rattle;
 mod run;

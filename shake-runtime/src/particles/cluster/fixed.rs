@@ -1,0 +1,348 @@
+//! The fixed-size kernel for families of uniform small shape (rigid water:
+//! 3 constraints on 3 particles in 3-D): sizes are const generics, so every
+//! loop is unrolled and every array lives in registers or L1.
+
+use super::*;
+
+/// Largest ARITY and DIM of a stencil the fixed-size kernel takes.
+pub(super) const FX: usize = 3;
+
+/// Gathers member coordinates (slots `sl`, ARITY·DIM entries) from the
+/// dense local copy `x` (NX = particles × DIM entries) into `xm`.
+#[inline(always)]
+pub(super) fn gather_fixed<S: Stencil, const NX: usize>(
+    sl: &[usize; FX],
+    x: &[f64; NX],
+    xm: &mut [f64; 9],
+) {
+    let d = S::DIM;
+    for a in 0..S::ARITY {
+        for k in 0..d {
+            xm[a * d + k] = x[sl[a] * d + k];
+        }
+    }
+}
+
+/// Σ over member j's block `a` (ARITY·DIM entries, its particles `sl`) of
+/// a · w · b with b a dense local vector and w the per-coordinate inverse
+/// masses (`None`: 1).
+#[inline(always)]
+pub(super) fn dot_block<S: Stencil, const NX: usize>(
+    sl: &[usize; FX],
+    a: &[f64; 9],
+    w: Option<&[f64; NX]>,
+    b: &[f64; NX],
+) -> f64 {
+    let d = S::DIM;
+    let mut s = 0.0;
+    for t in 0..S::ARITY {
+        for k in 0..d {
+            let i = sl[t] * d + k;
+            let v = a[t * d + k] * b[i];
+            s += match w {
+                Some(w) => v * w[i],
+                None => v,
+            };
+        }
+    }
+    s
+}
+
+/// y ← y − f · a on member j's particles (`a` its block).
+#[inline(always)]
+pub(super) fn axpy_block<S: Stencil, const NX: usize>(
+    sl: &[usize; FX],
+    f: f64,
+    a: &[f64; 9],
+    y: &mut [f64; NX],
+) {
+    let d = S::DIM;
+    for t in 0..S::ARITY {
+        for k in 0..d {
+            y[sl[t] * d + k] -= f * a[t * d + k];
+        }
+    }
+}
+
+/// Scatters a member block into a dense local row (the row's other
+/// entries are left as they are: zero, set once per family).
+#[inline(always)]
+pub(super) fn scatter_block<S: Stencil, const NX: usize>(
+    sl: &[usize; FX],
+    a: &[f64; 9],
+    row: &mut [f64; NX],
+) {
+    let d = S::DIM;
+    for t in 0..S::ARITY {
+        for k in 0..d {
+            row[sl[t] * d + k] = a[t * d + k];
+        }
+    }
+}
+
+/// The stack buffers of [`shake_fixed`], set up once per family.
+pub(super) struct Fixed<const MC: usize, const NX: usize> {
+    /// The slots of the previous cluster: the dense rows are zero off
+    /// them, so they are cleared only when the slots change.
+    pub(super) sl: [[usize; FX]; MC],
+    /// W G(x0), dense rows.
+    pub(super) wg0d: [[f64; NX]; MC],
+    /// G(x1), dense rows (velocity stage).
+    pub(super) grd: [[f64; NX]; MC],
+}
+
+/// [`shake_one`] for a family whose clusters all have MC constraints on NP
+/// particles (NX = NP · DIM local coordinates): the same exact Newton and
+/// the same fused velocity stage, with every size a compile-time constant,
+/// all loops unrolled, the cluster's slots read once and clamped to < NP
+/// (no bounds checks inside). The member blocks of G stay compact (ARITY ·
+/// DIM entries, written by the stencil in place); the blocks they are
+/// paired with in J = G(x) W G(x0)ᵀ and N = G W Gᵀ are scattered once per
+/// cluster into dense rows, so each entry of J or N is one short dot
+/// product with no slot comparisons. Agrees with [`shake_one`] to
+/// round-off (only the order of the sums differs).
+#[inline(always)]
+pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX: usize>(
+    w: &mut Work<'_>,
+    f: &mut Fixed<MC, NX>,
+    c: usize,
+    stencil: &S,
+    table: &Table,
+    plan: &FamilyClusters,
+    args: &ClusterArgs<'_>,
+    fuse: bool,
+    q: &mut [f64],
+    p: &mut [f64],
+) -> Result<(), ClusterFailure> {
+    let (d, ar) = (S::DIM, S::ARITY);
+    let wd = ar * d;
+    debug_assert!(MC <= 3 && NX == NP * d && ar <= FX && d <= FX);
+    let tol2 = args.tol * args.tol;
+    let (m0, p0) = (c * MC, c * NP);
+    let members: &[u32; MC] = plan.members[m0..m0 + MC].try_into().unwrap();
+    let parts: &[u32; NP] = plan.particles[p0..p0 + NP].try_into().unwrap();
+    let slots = &plan.slots[m0 * ar..(m0 + MC) * ar];
+    let mut sl = [[0usize; FX]; MC];
+    let mut changed = false;
+    for j in 0..MC {
+        for a in 0..ar {
+            sl[j][a] = (slots[j * ar + a] as usize).min(NP - 1);
+            changed |= sl[j][a] != f.sl[j][a];
+        }
+    }
+    // (An unrolled comparison: `sl != f.sl` became a call to memcmp.)
+    if changed {
+        f.sl = sl;
+        f.wg0d = [[0.0; NX]; MC];
+        f.grd = [[0.0; NX]; MC];
+    }
+    let (mut x0, mut x, mut pl, mut wx) = ([0.0; NX], [0.0; NX], [0.0; NX], [0.0; NX]);
+    for s in 0..NP {
+        let i = parts[s] as usize;
+        let (a0, aq, ap) = (&args.q0[i * d..], &q[i * d..], &p[i * d..]);
+        let wi = args.inv_mass[i];
+        for k in 0..d {
+            x0[s * d + k] = a0[k];
+            x[s * d + k] = aq[k];
+            pl[s * d + k] = ap[k];
+            wx[s * d + k] = wi;
+        }
+    }
+    let mut data = [&[][..]; MC];
+    for j in 0..MC {
+        data[j] = table.data(members[j] as usize);
+    }
+    // G(x0) and W G(x0) (member blocks, and W G(x0) as dense rows), and the
+    // residual scales 1 / (|∇g_j(x0)|² extent_j²).
+    let mut g0 = [[0.0; 9]; MC];
+    let mut wg0 = [[0.0; 9]; MC];
+    let mut s2 = [0.0; MC];
+    let mut xm = [0.0; 9];
+    for j in 0..MC {
+        gather_fixed::<S, NX>(&sl[j], &x0, &mut xm);
+        stencil.gradient(&xm[..wd], data[j], &mut g0[j][..wd]);
+        let mut n2 = 0.0;
+        for t in 0..ar {
+            for k in 0..d {
+                let v = g0[j][t * d + k];
+                n2 += v * v;
+                wg0[j][t * d + k] = wx[sl[j][t] * d + k] * v;
+            }
+        }
+        s2[j] = 1.0 / (n2 * extent2::<S>(&xm[..wd])).max(f64::MIN_POSITIVE);
+        scatter_block::<S, NX>(&sl[j], &wg0[j], &mut f.wg0d[j]);
+    }
+    let mut nu = [0.0; MC];
+    if let (true, Some(st)) = (w.warm, w.store.as_deref()) {
+        for m in 0..MC {
+            nu[m] = st[members[m] as usize];
+            axpy_block::<S, NX>(&sl[m], nu[m], &wg0[m], &mut x);
+        }
+    }
+    let mut gr = [[0.0; 9]; MC];
+    let mut gv = [0.0; MC];
+    let mut jinv = [0.0; 9];
+    let mut it = 0;
+    let mut need_jac = true;
+    let mut prev = f64::INFINITY;
+    loop {
+        let mut worst = 0.0f64;
+        let mut worst_j = 0;
+        for j in 0..MC {
+            gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
+            let g = if need_jac || fuse {
+                stencil.gradient(&xm[..wd], data[j], &mut gr[j][..wd])
+            } else {
+                stencil.value(&xm[..wd], data[j])
+            };
+            gv[j] = g;
+            let r = g * g * s2[j];
+            if !(r <= worst) {
+                worst = r;
+                worst_j = j;
+            }
+        }
+        if worst <= tol2 {
+            w.max_rel = w.max_rel.max(worst);
+            w.max_it = w.max_it.max(it);
+            w.iters += it as u64;
+            break;
+        }
+        if !worst.is_finite() || it >= args.max_iter {
+            return Err(ClusterFailure {
+                member: members[worst_j] as usize,
+                residual: worst.sqrt(),
+                iterations: it,
+                kind: if worst.is_finite() {
+                    FailureKind::NotConverged
+                } else {
+                    FailureKind::NotFinite
+                },
+            });
+        }
+        if !need_jac && worst > 0.25 * prev {
+            for j in 0..MC {
+                gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
+                stencil.gradient(&xm[..wd], data[j], &mut gr[j][..wd]);
+            }
+            need_jac = true;
+        }
+        prev = worst;
+        if need_jac {
+            for j in 0..MC {
+                for m in 0..MC {
+                    jinv[j * MC + m] = dot_block::<S, NX>(&sl[j], &gr[j], None, &f.wg0d[m]);
+                }
+            }
+            if !small_inverse(MC, &mut jinv[..MC * MC], false) {
+                return Err(ClusterFailure {
+                    member: members[worst_j] as usize,
+                    residual: worst.sqrt(),
+                    iterations: it,
+                    kind: FailureKind::SingularNewton,
+                });
+            }
+            need_jac = fuse;
+        }
+        small_apply(MC, &jinv[..MC * MC], &mut gv[..MC]);
+        for m in 0..MC {
+            nu[m] += gv[m];
+            axpy_block::<S, NX>(&sl[m], gv[m], &wg0[m], &mut x);
+        }
+        it += 1;
+    }
+    for s in 0..NP {
+        let i = parts[s] as usize;
+        q[i * d..i * d + d].copy_from_slice(&x[s * d..s * d + d]);
+    }
+    if let Some(st) = w.store.as_deref_mut() {
+        for m in 0..MC {
+            st[members[m] as usize] = nu[m];
+        }
+    }
+    if args.inv_h == 0.0 {
+        return Ok(());
+    }
+    // p½ = p̃ − G(x0)ᵀ ν / h.
+    for m in 0..MC {
+        axpy_block::<S, NX>(&sl[m], nu[m] * args.inv_h, &g0[m], &mut pl);
+    }
+    if fuse {
+        // Velocity stage with G(x1) (the last iterate's blocks in `gr`):
+        // N μ = G W p, p ← p − Gᵀ μ.
+        let mut n = [0.0; 9];
+        let mut r = [0.0; MC];
+        for l in 0..MC {
+            scatter_block::<S, NX>(&sl[l], &gr[l], &mut f.grd[l]);
+        }
+        for j in 0..MC {
+            r[j] = dot_block::<S, NX>(&sl[j], &gr[j], Some(&wx), &pl);
+            for l in 0..=j {
+                let v = dot_block::<S, NX>(&sl[j], &gr[j], Some(&wx), &f.grd[l]);
+                n[j * MC + l] = v;
+                n[l * MC + j] = v;
+            }
+        }
+        if !small_inverse(MC, &mut n[..MC * MC], true) {
+            return Err(ClusterFailure {
+                member: members[0] as usize,
+                residual: f64::NAN,
+                iterations: it,
+                kind: FailureKind::SingularN,
+            });
+        }
+        small_apply(MC, &n[..MC * MC], &mut r[..MC]);
+        for l in 0..MC {
+            axpy_block::<S, NX>(&sl[l], r[l], &gr[l], &mut pl);
+        }
+        // Hidden constraints after projection, relative to |∇g_j| ·
+        // |velocity of the member's particles| (squared).
+        let mut worst = 0.0f64;
+        for j in 0..MC {
+            let (mut rj, mut v2, mut n2) = (0.0, 0.0, 0.0);
+            for t in 0..ar {
+                for k in 0..d {
+                    let i = sl[j][t] * d + k;
+                    let v = wx[i] * pl[i];
+                    let g = gr[j][t * d + k];
+                    rj += g * v;
+                    v2 += v * v;
+                    n2 += g * g;
+                }
+            }
+            let rel = rj * rj / (n2 * v2).max(f64::MIN_POSITIVE);
+            if !(rel <= worst) {
+                worst = rel;
+            }
+        }
+        w.max_hidden = w.max_hidden.max(worst);
+    }
+    for s in 0..NP {
+        let i = parts[s] as usize;
+        p[i * d..i * d + d].copy_from_slice(&pl[s * d..s * d + d]);
+    }
+    Ok(())
+}
+
+/// The loop of [`shake_clusters`] over a family of uniform shape.
+#[inline(never)]
+pub(super) fn shake_fixed_all<S: Stencil, const MC: usize, const NP: usize, const NX: usize>(
+    w: &mut Work<'_>,
+    stencil: &S,
+    table: &Table,
+    plan: &FamilyClusters,
+    args: &ClusterArgs<'_>,
+    fuse: bool,
+    q: &mut [f64],
+    p: &mut [f64],
+) -> Result<(), ClusterFailure> {
+    let mut f = Fixed {
+        sl: [[usize::MAX; FX]; MC],
+        wg0d: [[0.0; NX]; MC],
+        grd: [[0.0; NX]; MC],
+    };
+    for c in 0..plan.len() {
+        shake_fixed::<S, MC, NP, NX>(w, &mut f, c, stencil, table, plan, args, fuse, q, p)?;
+    }
+    Ok(())
+}

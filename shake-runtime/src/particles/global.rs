@@ -1,0 +1,339 @@
+//! The coupled path of [`Rattle`](super::Rattle) (chains, general constraint
+//! graphs): one simplified Newton over every constraint, with the factor of
+//! N(q0) = G(q0) M⁻¹ G(q0)ᵀ assembled from the stencils' gradients and
+//! factorised by the banded or sparse [`SpdSolver`].
+
+use super::cluster::ClusterArgs;
+use super::graph::{self, Numbering};
+use super::rattle::StepReport;
+use super::{ParticleError, ParticleSystem};
+use crate::solver::SpdSolver;
+
+/// The coupled path (chains, general graphs): one simplified Newton over
+/// every constraint with the factor of N(q0).
+pub(super) struct Global {
+    pub(super) solver: SpdSolver,
+    /// Assembly of N from gradients: entry `pos[e]` gains
+    /// W_{part[e]} ∇_a g_x · ∇_a g_y with the two gradient blocks at
+    /// `ga[e]`, `gb[e]`.
+    pub(super) pos: Vec<u32>,
+    pub(super) ga: Vec<u32>,
+    pub(super) gb: Vec<u32>,
+    pub(super) part: Vec<u32>,
+    pub(super) grad0: Vec<f64>,
+    pub(super) grad1: Vec<f64>,
+    pub(super) scale0: Vec<f64>,
+    pub(super) scale1: Vec<f64>,
+    pub(super) g: Vec<f64>,
+    pub(super) nu: Vec<f64>,
+    pub(super) delta: Vec<f64>,
+    /// N's factor holds N(q) of the state with this stamp (0: none).
+    pub(super) factor_stamp: u64,
+}
+
+impl Global {
+    pub(super) fn new(
+        system: &ParticleSystem,
+        num: &Numbering,
+        comps: &graph::Components,
+        solver: SpdSolver,
+    ) -> Self {
+        let d = system.dim();
+        let m = system.constraints();
+        let fams = system.constraint_families();
+        // Where particle i sits in constraint c's row, and c's gradient block.
+        let block = |c: usize, i: u32| -> u32 {
+            let (f, k) = num.locate(c);
+            let t = fams[f].table();
+            let a = t
+                .particles(k)
+                .iter()
+                .position(|&j| j == i)
+                .expect("touching");
+            (num.grad_offsets[f] + (k * t.arity() + a) * d) as u32
+        };
+        let (mut pos, mut ga, mut gb, mut part) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for i in 0..system.particles() {
+            let cs = &comps.touch[comps.touch_start[i]..comps.touch_start[i + 1]];
+            for (a, &x) in cs.iter().enumerate() {
+                for &y in &cs[..=a] {
+                    let (x, y) = (x as usize, y as usize);
+                    let (r, c) = (x.max(y), x.min(y));
+                    pos.push(solver.position(r, c) as u32);
+                    ga.push(block(x, i as u32));
+                    gb.push(block(y, i as u32));
+                    part.push(i as u32);
+                }
+            }
+        }
+        let ng = *num.grad_offsets.last().unwrap();
+        Global {
+            solver,
+            pos,
+            ga,
+            gb,
+            part,
+            grad0: vec![0.0; ng],
+            grad1: vec![0.0; ng],
+            scale0: vec![0.0; m],
+            scale1: vec![0.0; m],
+            g: vec![0.0; m],
+            nu: vec![0.0; m],
+            delta: vec![0.0; m],
+            factor_stamp: 0,
+        }
+    }
+
+    pub(super) fn bytes(&self) -> usize {
+        self.solver.bytes()
+            + 4 * (self.pos.capacity()
+                + self.ga.capacity()
+                + self.gb.capacity()
+                + self.part.capacity())
+            + 8 * (self.grad0.capacity()
+                + self.grad1.capacity()
+                + self.scale0.capacity()
+                + self.scale1.capacity()
+                + self.g.capacity()
+                + self.nu.capacity()
+                + self.delta.capacity())
+    }
+
+    /// Gradients and scales at q into (grad, scale); every family.
+    pub(super) fn gradients(
+        system: &ParticleSystem,
+        num: &Numbering,
+        q: &[f64],
+        g: &mut [f64],
+        grad: &mut [f64],
+        scale: &mut [f64],
+    ) {
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            fam.gradients_scaled(q, &mut g[c0..c1], &mut grad[g0..g1], &mut scale[c0..c1]);
+        }
+    }
+
+    /// N = G W Gᵀ from `grad`, factorised.
+    pub(super) fn assemble_factor(
+        &mut self,
+        d: usize,
+        inv_m: &[f64],
+        which: u8,
+    ) -> Result<(), usize> {
+        self.solver.clear();
+        let grad = if which == 0 { &self.grad0 } else { &self.grad1 };
+        let v = self.solver.values_mut();
+        for e in 0..self.pos.len() {
+            let (a, b) = (self.ga[e] as usize, self.gb[e] as usize);
+            let mut dot = 0.0;
+            for c in 0..d {
+                dot += grad[a + c] * grad[b + c];
+            }
+            v[self.pos[e] as usize] += inv_m[self.part[e] as usize] * dot;
+        }
+        self.solver.factor()
+    }
+
+    /// out ← out − factor · W^w Gᵀ x, family by family (monomorphic loops).
+    pub(super) fn scatter(
+        system: &ParticleSystem,
+        num: &Numbering,
+        grad: &[f64],
+        x: &[f64],
+        weighted: bool,
+        out: &mut [f64],
+        factor: f64,
+    ) {
+        let inv_m = system.inverse_masses();
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            fam.scatter(&grad[g0..g1], &x[c0..c1], inv_m, weighted, factor, out);
+        }
+    }
+
+    pub(super) fn singular(
+        system: &ParticleSystem,
+        num: &Numbering,
+        pivot: usize,
+        iterations: usize,
+        k: u64,
+        time: f64,
+    ) -> ParticleError {
+        // The sparse solver's pivot is in its own order; name a member of
+        // the system anyway (the pivot's constraint in natural order).
+        let (f, member) = num.locate(pivot.min(system.constraints().saturating_sub(1)));
+        ParticleError::Singular {
+            step: k,
+            time,
+            matrix: "N = G M⁻¹ Gᵀ",
+            iterations,
+            family: system.constraint_families()[f].name().to_string(),
+            member,
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn position_stage(
+        &mut self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        args: &ClusterArgs<'_>,
+        reuse: bool,
+        qn: &mut [f64],
+        pn: &mut [f64],
+        k: u64,
+        time: f64,
+        report: &mut StepReport,
+    ) -> Result<(), ParticleError> {
+        let d = system.dim();
+        let inv_m = system.inverse_masses();
+        if !reuse {
+            Self::gradients(
+                system,
+                num,
+                args.q0,
+                &mut self.g,
+                &mut self.grad0,
+                &mut self.scale0,
+            );
+            self.assemble_factor(d, inv_m, 0)
+                .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
+        }
+        if reuse && args.inv_h != 0.0 {
+            // Warm start along a trajectory: the previous step's ν.
+            Self::scatter(system, num, &self.grad0, &self.nu, true, qn, 1.0);
+        } else {
+            self.nu.fill(0.0);
+        }
+        let mut it = 0;
+        let mut first = f64::NAN;
+        loop {
+            for (f, fam) in system.constraint_families().iter().enumerate() {
+                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                fam.values(qn, &mut self.g[c0..c1]);
+            }
+            let mut worst = 0.0f64;
+            let mut worst_c = 0;
+            for (c, (&g, &s)) in self.g.iter().zip(&self.scale0).enumerate() {
+                // |g| / scale, not g² / scale²: squares underflow at length
+                // scales below ~1e-77 and Newton would "converge" at once.
+                let r = g.abs() / s;
+                if !(r <= worst) {
+                    worst = r;
+                    worst_c = c;
+                }
+            }
+            if !worst.is_finite() {
+                return Err(ParticleError::NotFinite {
+                    step: k,
+                    time,
+                    what: "constraint",
+                    index: worst_c,
+                });
+            }
+            if worst <= args.tol {
+                report.max_rel_g = worst;
+                report.newton_iterations = it;
+                report.newton_total = it as u64;
+                break;
+            }
+            if it == 0 {
+                first = worst;
+            }
+            // A simplified Newton that has grown the residual a millionfold
+            // is diverging: stop before the budget.
+            if it >= args.max_iter || worst > 1e6 * first {
+                let (f, member) = num.locate(worst_c);
+                return Err(ParticleError::NotConverged {
+                    step: k,
+                    time,
+                    residual: worst,
+                    iterations: it,
+                    family: system.constraint_families()[f].name().to_string(),
+                    member,
+                });
+            }
+            // g is re-evaluated next iteration: solve in its buffer.
+            std::mem::swap(&mut self.delta, &mut self.g);
+            self.solver.solve(&mut self.delta);
+            for (n, dl) in self.nu.iter_mut().zip(&self.delta) {
+                *n += dl;
+            }
+            // G(q0) recomputed, not streamed from grad0 (see scatter_at).
+            let inv_m = system.inverse_masses();
+            for (f, fam) in system.constraint_families().iter().enumerate() {
+                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                fam.scatter_at(args.q0, &self.delta[c0..c1], inv_m, true, 1.0, qn);
+            }
+            it += 1;
+        }
+        if args.inv_h != 0.0 {
+            Self::scatter(system, num, &self.grad0, &self.nu, false, pn, args.inv_h);
+        }
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn velocity_stage(
+        &mut self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        q1: &[f64],
+        pn: &mut [f64],
+        k: u64,
+        time: f64,
+        report: &mut StepReport,
+    ) -> Result<(), ParticleError> {
+        let d = system.dim();
+        let inv_m = system.inverse_masses();
+        Self::gradients(
+            system,
+            num,
+            q1,
+            &mut self.g,
+            &mut self.grad1,
+            &mut self.scale1,
+        );
+        self.assemble_factor(d, inv_m, 1)
+            .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
+        self.hidden(system, num, pn, false);
+        self.solver.solve(&mut self.delta);
+        Self::scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
+        // The hidden residual after projection, relative per member.
+        let worst = self.hidden(system, num, pn, true);
+        report.max_hidden = worst.sqrt();
+        // grad1/scale1 (at q1) become the next step's grad0/scale0.
+        std::mem::swap(&mut self.grad0, &mut self.grad1);
+        std::mem::swap(&mut self.scale0, &mut self.scale1);
+        Ok(())
+    }
+
+    /// delta ← G(q1) W p (grad1); with `ratio`, the largest squared
+    /// relative hidden residual.
+    pub(super) fn hidden(
+        &mut self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        p: &[f64],
+        ratio: bool,
+    ) -> f64 {
+        let inv_m = system.inverse_masses();
+        let mut worst = 0.0f64;
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+            let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+            let w = fam.hidden(
+                &self.grad1[g0..g1],
+                inv_m,
+                p,
+                &mut self.delta[c0..c1],
+                ratio,
+            );
+            worst = worst.max(w);
+        }
+        worst
+    }
+}
