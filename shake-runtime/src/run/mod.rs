@@ -400,9 +400,11 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         let mut last_recorded = 0;
         for k in 1..=n {
             let t_prev = t0 + (k - 1) as f64 * h;
+            // Errors of step k carry k and the time it was computing.
+            let t = t0 + k as f64 * h;
             prev_q.copy_from_slice(&q);
             prev_p.copy_from_slice(&p);
-            let info = match integ.advance(&mut q, &mut p, per_step, k, t_prev) {
+            let info = match integ.advance(&mut q, &mut p, per_step, k, t) {
                 Ok(info) => {
                     acc.add(&info);
                     if integ.diagnostics && last_recorded == k - 1 {
@@ -430,7 +432,6 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                     return fail(traj, e);
                 }
             };
-            let t = t0 + k as f64 * h;
             let on_stride = k % stride == 0 || k == n;
             if on_stride {
                 if let Err(e) = integ.record(
