@@ -1,117 +1,16 @@
-//! Ensembles: many initial conditions through one integrator configuration,
-//! in parallel.
-//!
-//! Sampling and sensitivity studies run the same system, method and step
-//! size from many initial states; the runs are independent, so they are
-//! spread over the cores with rayon. Each worker thread clones the
-//! template [`Integrator`] once (its workspace included) and reuses it for
-//! every run it takes, so an ensemble allocates per thread, not per run or
-//! per step. The results come back in the order of the initial states, and
-//! each run is the same computation as on one thread (the same floating-
-//! point operations in the same order): the results do not depend on the
-//! number of threads.
-//!
-//! The pool is rayon's global one (one thread per core, or
-//! `RAYON_NUM_THREADS`); to choose the number of threads, call inside
-//! `shake_runtime::rayon::ThreadPoolBuilder::new().num_threads(n).build()?.install(..)`.
-//!
-//! ```
-//! use shake_runtime::{ensemble, Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-//!
-//! let rattle = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).rattle();
-//! // Pendulums released at rest from angles 0.1, 0.2, …, 1.0.
-//! let starts: Vec<State> = (1..=10)
-//!     .map(|k| {
-//!         let a = 0.1 * k as f64;
-//!         State::from_slices(&[a.sin(), -a.cos()], &[0.0, 0.0])
-//!     })
-//!     .collect();
-//! // The largest |q₁| over one second of each run.
-//! let reach = ensemble(&rattle, &starts, |integ, _k, z0| {
-//!     let mut max = 0.0f64;
-//!     let out = integ
-//!         .run(z0.clone(), Stop::Time(1.0))
-//!         .store(false)
-//!         .observe(|_, _, z| max = max.max(z.q[0].abs()))
-//!         .execute();
-//!     assert!(out.error.is_none());
-//!     max
-//! });
-//! assert_eq!(reach.len(), 10);
-//! assert!(reach.windows(2).all(|w| w[0] < w[1]));
-//! ```
-
-use crate::base_map::BaseMap;
-use crate::integrator::{Integrator, RunOutcome, Stop};
-use crate::state::State;
-use crate::system::ConstrainedSystem;
-use rayon::prelude::*;
-
-/// `f(integrator, k, &initial[k])` for every k, in parallel; the results in
-/// the order of `initial`. `integrator` is a per-thread clone of
-/// `template` (same system, base map, h, method and options).
-///
-/// ```
-/// use shake_runtime::{ensemble, Integrator, ImplicitMidpoint, State, examples::Pendulum};
-/// let shake = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).shake();
-/// let starts = vec![State::from_slices(&[0.0, -1.0], &[0.5, 0.0]); 4];
-/// let ends = ensemble(&shake, &starts, |integ, _, z0| integ.step(z0).unwrap());
-/// assert!(ends.iter().all(|z| z == &ends[0]));
-/// ```
-pub fn ensemble<S, B, T, F>(template: &Integrator<S, B>, initial: &[State], f: F) -> Vec<T>
-where
-    S: ConstrainedSystem + Clone + Sync,
-    B: BaseMap,
-    T: Send,
-    F: Fn(&mut Integrator<S, B>, usize, &State) -> T + Sync,
-{
-    initial
-        .par_iter()
-        .enumerate()
-        .map_init(|| template.clone(), |integ, (k, z0)| f(integ, k, z0))
-        .collect()
-}
-
-/// Runs every initial state until `stop`, keeping every `stride`-th state
-/// (see [`Run::stride`](crate::Run::stride)); the outcomes in the order of
-/// `initial`.
-///
-/// ```
-/// use shake_runtime::{run_ensemble, Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-/// let rattle = Integrator::new(Pendulum::default(), StormerVerlet, 0.05).rattle();
-/// let starts: Vec<State> = (0..8)
-///     .map(|k| State::from_slices(&[0.0, -1.0], &[0.1 * k as f64, 0.0]))
-///     .collect();
-/// let outs = run_ensemble(&rattle, &starts, Stop::Time(1.0), 10);
-/// assert!(outs.iter().all(|o| o.error.is_none() && o.trajectory.len() == 3));
-/// ```
-pub fn run_ensemble<S, B>(
-    template: &Integrator<S, B>,
-    initial: &[State],
-    stop: Stop,
-    stride: u64,
-) -> Vec<RunOutcome>
-where
-    S: ConstrainedSystem + Clone + Sync,
-    B: BaseMap,
-{
-    ensemble(template, initial, |integ, _, z0| {
-        integ.run(z0.clone(), stop).stride(stride).execute()
-    })
-}
-
-// ---------------------------------------------------------------------------
-// One member's outcome as flat words: what crosses a process boundary (an MPI
-// gather, a results file) for the distributed ensembles of `ensemble_mpi`
-// and the resumable store of `ensemble_store`.
+//! One member's outcome as flat words: what crosses a process boundary (an MPI
+//! gather, a results file) for the distributed ensembles of `ensemble_mpi`
+//! and the resumable store of `ensemble_store`.
 
 use crate::diagnostics::DiagnosticRecord;
 use crate::error::{SolveError, Stage, StepError};
-use crate::integrator::Trajectory;
+use crate::integrator::{RunOutcome, Trajectory};
 
-/// The first word of every packed record ("SHAKE", version 2: with the
-/// multipliers λ, σ of each diagnostic record).
-const RECORD_TAG: u64 = 0x5348_414b_4502;
+/// The first word of every packed record ("SHAKE", version 3: with the
+/// multipliers λ, σ of each diagnostic record, and the error variants of
+/// version 3: entry of a non-finite value, singular SHAKE Jacobian, singular
+/// N, the constraint and cause of a state off M).
+const RECORD_TAG: u64 = 0x5348_414b_4503;
 /// Words of one packed [`DiagnosticRecord`].
 const DIAGNOSTIC_WORDS: usize = 10;
 
@@ -225,7 +124,7 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
 /// use shake_runtime::ensemble::{pack_outcome, unpack_outcome, RecordError};
 /// let failed = RunOutcome {
 ///     trajectory: Trajectory::default(),
-///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0 }),
+///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0, entry: 0 }),
 /// };
 /// let mut words = Vec::new();
 /// pack_outcome(3, &failed, &mut words);
@@ -332,8 +231,13 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             w.extend([1, b(value)]);
             pack_str(what, w);
         }
-        StepError::NonFinite { what, step, t } => {
-            w.extend([2, step, b(t)]);
+        StepError::NonFinite {
+            what,
+            step,
+            t,
+            entry,
+        } => {
+            w.extend([2, step, b(t), entry as u64]);
             pack_str(what, w);
         }
         StepError::NewtonNotConverged {
@@ -342,23 +246,16 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             t,
             source,
         } => {
-            let (kind, iterations, residual) = match source {
-                SolveError::NotConverged {
-                    iterations,
-                    residual,
-                } => (0, iterations, residual),
-                SolveError::Singular { iterations } => (1, iterations, 0.0),
-                SolveError::NonFinite { iterations } => (2, iterations, 0.0),
-            };
-            w.extend([
-                3,
-                stage_code(stage),
-                step,
-                b(t),
-                kind,
-                iterations as u64,
-                b(residual),
-            ]);
+            w.extend([3, stage_code(stage), step, b(t)]);
+            pack_solve(Some(source), w);
+        }
+        StepError::SingularShakeJacobian {
+            step,
+            t,
+            iterations,
+        } => w.extend([8, step, b(t), iterations as u64]),
+        StepError::SingularNondegeneracyMatrix { stage, step, t } => {
+            w.extend([9, stage_code(stage), step, b(t)])
         }
         StepError::NondegeneracyLost {
             stage,
@@ -385,8 +282,47 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             t,
             residual,
             tolerance,
-        } => w.extend([7, step, b(t), b(residual), b(tolerance)]),
+            ref constraint,
+            cause,
+        } => {
+            w.extend([7, step, b(t), b(residual), b(tolerance)]);
+            pack_str(constraint, w);
+            pack_solve(cause, w);
+        }
     }
+}
+
+/// A solver error as (kind, iterations, residual); kind 3 is none.
+fn pack_solve(e: Option<SolveError>, w: &mut Vec<u64>) {
+    let (kind, iterations, residual) = match e {
+        Some(SolveError::NotConverged {
+            iterations,
+            residual,
+        }) => (0, iterations, residual),
+        Some(SolveError::Singular { iterations }) => (1, iterations, 0.0),
+        Some(SolveError::NonFinite { iterations }) => (2, iterations, 0.0),
+        None => (3, 0, 0.0),
+    };
+    w.extend([kind, iterations as u64, residual.to_bits()]);
+}
+
+fn unpack_solve(r: &mut Reader) -> Result<Option<SolveError>, RecordError> {
+    let (kind, iterations, residual) = (r.word()?, r.index("iterations")?, r.float()?);
+    Ok(Some(match kind {
+        0 => SolveError::NotConverged {
+            iterations,
+            residual,
+        },
+        1 => SolveError::Singular { iterations },
+        2 => SolveError::NonFinite { iterations },
+        3 => return Ok(None),
+        k => {
+            return Err(RecordError::Corrupted {
+                what: "solve error",
+                value: k,
+            })
+        }
+    }))
 }
 
 fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
@@ -400,30 +336,20 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
             }
         }
         2 => {
-            let (step, t) = (r.word()?, r.float()?);
+            let (step, t, entry) = (r.word()?, r.float()?, r.index("entry")?);
             StepError::NonFinite {
                 what: r.string()?,
                 step,
                 t,
+                entry,
             }
         }
         3 => {
             let (stage, step, t) = (r.stage()?, r.word()?, r.float()?);
-            let (kind, iterations, residual) = (r.word()?, r.index("iterations")?, r.float()?);
-            let source = match kind {
-                0 => SolveError::NotConverged {
-                    iterations,
-                    residual,
-                },
-                1 => SolveError::Singular { iterations },
-                2 => SolveError::NonFinite { iterations },
-                k => {
-                    return Err(RecordError::Corrupted {
-                        what: "solve error",
-                        value: k,
-                    })
-                }
-            };
+            let source = unpack_solve(r)?.ok_or(RecordError::Corrupted {
+                what: "solve error",
+                value: 3,
+            })?;
             StepError::NewtonNotConverged {
                 stage,
                 step,
@@ -431,6 +357,16 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
                 source,
             }
         }
+        8 => StepError::SingularShakeJacobian {
+            step: r.word()?,
+            t: r.float()?,
+            iterations: r.index("iterations")?,
+        },
+        9 => StepError::SingularNondegeneracyMatrix {
+            stage: r.stage()?,
+            step: r.word()?,
+            t: r.float()?,
+        },
         4 => StepError::NondegeneracyLost {
             stage: r.stage()?,
             step: r.word()?,
@@ -456,6 +392,8 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
             t: r.float()?,
             residual: r.float()?,
             tolerance: r.float()?,
+            constraint: r.string()?.to_string(),
+            cause: unpack_solve(r)?,
         },
         k => {
             return Err(RecordError::Corrupted {
@@ -575,151 +513,5 @@ impl Reader<'_> {
             value: len as u64,
         })?;
         Ok(intern(s))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::examples::Pendulum;
-    use crate::{Stop, StormerVerlet};
-
-    fn bits(k: usize, out: &RunOutcome) -> Vec<u64> {
-        let mut w = Vec::new();
-        pack_outcome(k, out, &mut w);
-        w
-    }
-
-    /// A member's outcome must not depend on which members ran before it
-    /// on the same integrator (a rayon worker or an MPI rank reuses one):
-    /// an integrator that has run another member first gives the same bits
-    /// as a fresh one. (SHAKE's difference-quotient scale used to be kept
-    /// from the first run, which changed the last bits of later ones.)
-    #[test]
-    fn a_member_does_not_depend_on_its_predecessors() {
-        let p = Pendulum::default();
-        let template = Integrator::new(p, StormerVerlet, 0.01).rattle();
-        for k in 1..8 {
-            let z = p.state(0.4 * k as f64, (k as f64).sin());
-            let fresh = template
-                .clone()
-                .run(z.clone(), Stop::Steps(200))
-                .stride(50)
-                .execute();
-            let mut reused = template.clone();
-            let _ = reused.run(p.state(0.05, 0.0), Stop::Steps(10)).execute();
-            let again = reused.run(z, Stop::Steps(200)).stride(50).execute();
-            assert_eq!(bits(k, &fresh), bits(k, &again), "member {k}");
-        }
-    }
-
-    /// Every error variant reads back as itself, after the trajectory and
-    /// diagnostics; a truncated record is an error at every cut.
-    #[test]
-    fn every_error_round_trips() {
-        let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.05)
-            .rattle()
-            .with_diagnostics();
-        let mut out = integ
-            .run(Pendulum::default().state(1.0, -0.3), Stop::Steps(9))
-            .stride(4)
-            .execute();
-        assert_eq!(out.trajectory.diagnostics.len(), 4);
-        let errors = [
-            StepError::InvalidInput {
-                what: "stride must be at least 1",
-                value: -0.0,
-            },
-            StepError::NonFinite {
-                what: "a message that is longer than eight bytes",
-                step: 3,
-                t: f64::NAN,
-            },
-            StepError::NewtonNotConverged {
-                stage: Stage::BaseMap,
-                step: u64::MAX,
-                t: 1.5,
-                source: SolveError::NotConverged {
-                    iterations: 50,
-                    residual: 1e-3,
-                },
-            },
-            StepError::NewtonNotConverged {
-                stage: Stage::Fibre,
-                step: 1,
-                t: 0.0,
-                source: SolveError::Singular { iterations: 2 },
-            },
-            StepError::NewtonNotConverged {
-                stage: Stage::ProjectionOntoM,
-                step: 1,
-                t: 0.0,
-                source: SolveError::NonFinite { iterations: 7 },
-            },
-            StepError::NondegeneracyLost {
-                stage: Stage::Rattle,
-                step: 4,
-                t: 0.2,
-                condition: f64::INFINITY,
-                limit: 1e12,
-            },
-            StepError::ComponentJump {
-                step: 5,
-                t: 0.25,
-                det_before: 1.0,
-                det_after: -2.0,
-            },
-            StepError::FibreJump {
-                stage: Stage::Shake,
-                step: 6,
-                t: 0.3,
-                lambda: 2.0,
-                predicted: 1e-3,
-            },
-            StepError::NotOnConstraint {
-                step: 0,
-                t: 0.0,
-                residual: 0.1,
-                tolerance: 1e-10,
-            },
-        ];
-        for e in errors {
-            out.error = Some(e.clone());
-            let w = bits(11, &out);
-            let (k, back, used) = unpack_outcome(&w).unwrap();
-            assert_eq!((k, used), (11, w.len()));
-            assert_eq!(bits(11, &back), w, "{e}");
-            assert_eq!(back.error.unwrap().to_string(), e.to_string());
-            for cut in 0..w.len() {
-                assert!(unpack_outcome(&w[..cut]).is_err(), "cut {cut} of {e}");
-            }
-        }
-    }
-
-    /// Records follow each other in one buffer (as in a gather).
-    #[test]
-    fn records_concatenate() {
-        let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
-        let outs: Vec<_> = (0..3)
-            .map(|k| {
-                integ
-                    .run(
-                        Pendulum::default().state(0.1 * k as f64, 0.0),
-                        Stop::Steps(k),
-                    )
-                    .execute()
-            })
-            .collect();
-        let mut w = Vec::new();
-        for (k, o) in outs.iter().enumerate() {
-            pack_outcome(10 + k, o, &mut w);
-        }
-        let mut rest = &w[..];
-        for (k, o) in outs.iter().enumerate() {
-            let (member, back, used) = unpack_outcome(rest).unwrap();
-            assert_eq!((member, &back), (10 + k, o));
-            rest = &rest[used..];
-        }
-        assert!(rest.is_empty());
     }
 }
