@@ -30,6 +30,7 @@ pub mod parse;
 pub mod parse_topology;
 pub mod simplify;
 pub mod symbolic;
+pub mod tape;
 
 mod declare;
 
