@@ -97,9 +97,14 @@ impl DeclError {
 /// Particle systems (`particles x[3]; ...`, run-time topologies) are not
 /// declarable this way yet and are refused.
 pub fn declare(src: &str) -> Result<Declared, DeclError> {
-    let tokens: TokenStream = src
-        .parse()
-        .map_err(|e: proc_macro2::LexError| DeclError::at(e.span(), e.to_string()))?;
+    let tokens: TokenStream = src.parse().map_err(|e: proc_macro2::LexError| {
+        DeclError::at(
+            e.span(),
+            "the declaration does not split into tokens: unbalanced (), [] or {}, an \
+                 unterminated literal or a character outside the grammar"
+                .into(),
+        )
+    })?;
     if parse_topology::is_particle_system(&tokens) {
         return Err(DeclError {
             message: "particle systems (run-time topologies) cannot be declared from a string \

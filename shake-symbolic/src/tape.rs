@@ -5,7 +5,8 @@
 //! # Layout
 //!
 //! Registers `0..d` hold q, `d..2d` hold p, `2d..2d+m` hold λ, then come the
-//! parameters and the constants (the *statics*, copied in at each call),
+//! parameters and the constants (the *statics*, copied in when another
+//! program last used the thread's register file),
 //! then one register per computed node. Hash-consing already made every
 //! shared subexpression one node, so, as for the macro's `let`s, a function
 //! is scheduled by collecting the nodes its outputs reach and computing
@@ -30,25 +31,26 @@ use crate::lower::System;
 use crate::symbolic::{Func, Graph, Node, NodeId};
 use std::cell::RefCell;
 use std::collections::{BTreeSet, HashMap};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// One instruction: `dst = f(a, b)` on registers.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub enum Op {
-    /// r[d] = r[a] + r[b]
+    /// `r[d] = r[a] + r[b]`
     Add(u32, u32, u32),
-    /// r[d] = r[a] · r[b]
+    /// `r[d] = r[a] · r[b]`
     Mul(u32, u32, u32),
-    /// r[d] = r[a] / r[b]
+    /// `r[d] = r[a] / r[b]`
     Div(u32, u32, u32),
-    /// r[d] = −r[a]
+    /// `r[d] = −r[a]`
     Neg(u32, u32),
-    /// r[d] = r[a]^n
+    /// `r[d] = r[a]^n`
     Powi(u32, u32, i32),
-    /// r[d] = r[a]^r[b]
+    /// `r[d] = r[a]^r[b]`
     Powf(u32, u32, u32),
-    /// r[d] = √r[a]
+    /// `r[d] = √r[a]`
     Sqrt(u32, u32),
-    /// r[d] = f(r[a])
+    /// `r[d] = f(r[a])`
     Call(u32, Func, u32),
 }
 
@@ -90,6 +92,9 @@ pub struct Program {
     n_params: usize,
     /// Parameters then constants, copied to registers `2d + m ..`.
     statics: Vec<f64>,
+    /// Names this program's statics: the register file skips copying them
+    /// when they are already there (a new id on every change).
+    id: u64,
     /// H (one output, index 0).
     pub hamiltonian: Tape,
     /// ∂H/∂q (d outputs).
@@ -127,9 +132,24 @@ pub struct Program {
     pub constraint_names: Vec<String>,
 }
 
+/// A register file: the registers and the id of the program whose statics
+/// it holds (0: none).
+struct Registers {
+    r: Vec<f64>,
+    statics_of: u64,
+}
+
 thread_local! {
     /// The register file, per thread, grown once to the largest tape.
-    static REGISTERS: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+    static REGISTERS: RefCell<Registers> = const {
+        RefCell::new(Registers { r: Vec::new(), statics_of: 0 })
+    };
+}
+
+/// A fresh program id (never 0).
+fn next_id() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 struct Compiler<'a> {
@@ -434,6 +454,7 @@ impl Program {
             m,
             n_params: c.n_params,
             statics: c.statics,
+            id: next_id(),
             hamiltonian,
             grad_q,
             grad_p,
@@ -495,6 +516,7 @@ impl Program {
     /// Sets parameter `i` (declaration order).
     pub fn set_parameter(&mut self, i: usize, value: f64) {
         self.statics[..self.n_params][i] = value;
+        self.id = next_id();
     }
 
     /// Runs `tape` at (q, p, λ) and hands each output `(index, value)` to
@@ -510,18 +532,30 @@ impl Program {
         mut out: impl FnMut(usize, f64),
     ) {
         REGISTERS.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut r) => {
-                if r.len() < tape.regs {
-                    r.resize(tape.regs, 0.0);
+            Ok(mut file) => {
+                let file = &mut *file;
+                if file.r.len() < tape.regs {
+                    file.r.resize(tape.regs, 0.0);
                 }
-                self.run(tape, q, p, lambda, &mut r, &mut out);
+                let fresh = file.statics_of != self.id;
+                file.statics_of = self.id;
+                self.run(tape, q, p, lambda, &mut file.r, fresh, &mut out);
             }
-            // Re-entered from `out`: a buffer of its own.
-            Err(_) => self.run(tape, q, p, lambda, &mut vec![0.0; tape.regs], &mut out),
+            // Re-entered from `out`: a file of its own.
+            Err(_) => self.run(
+                tape,
+                q,
+                p,
+                lambda,
+                &mut vec![0.0; tape.regs],
+                true,
+                &mut out,
+            ),
         });
     }
 
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         tape: &Tape,
@@ -529,16 +563,25 @@ impl Program {
         p: &[f64],
         lambda: &[f64],
         r: &mut [f64],
+        statics: bool,
         out: &mut impl FnMut(usize, f64),
     ) {
         let (d, m) = (self.dof, self.m);
-        r[..d].copy_from_slice(&q[..d]);
-        let lp = p.len().min(d);
-        r[d..d + lp].copy_from_slice(&p[..lp]);
-        let l = lambda.len().min(m);
-        r[2 * d..2 * d + l].copy_from_slice(&lambda[..l]);
-        let b = 2 * d + m;
-        r[b..b + self.statics.len()].copy_from_slice(&self.statics);
+        // Element by element: these are a few entries, below the size where
+        // a call to memcpy pays.
+        for (r, x) in r[..d].iter_mut().zip(q) {
+            *r = *x;
+        }
+        for (r, x) in r[d..2 * d].iter_mut().zip(p) {
+            *r = *x;
+        }
+        for (r, x) in r[2 * d..2 * d + m].iter_mut().zip(lambda) {
+            *r = *x;
+        }
+        if statics {
+            let b = 2 * d + m;
+            r[b..b + self.statics.len()].copy_from_slice(&self.statics);
+        }
         execute(&tape.ops, &mut r[..tape.regs]);
         for &(i, s) in &tape.outs {
             out(i as usize, r[s as usize]);
