@@ -7,47 +7,41 @@ pub use shake::models::{
     Chain8, DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum, SphericalPendulum,
 };
 
-constrained_system! {
-    /// A planar chain of 4 unit masses and rods, anchored at the origin.
-    pub struct Chain4 {
-        parameters { length, gravity }
-        const N = 4;
-        dof q[2*N], p[2*N];
-        hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
-        constraints {
-            link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
-                else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
+/// A planar chain of `$n` unit masses and rods, anchored at the origin (the
+/// facade's `Chain8` with another N).
+macro_rules! chain {
+    ($name:ident, $n:literal, $doc:literal) => {
+        constrained_system! {
+            #[doc = $doc]
+            pub struct $name {
+                parameters { length, gravity }
+                const N = $n;
+                dof q[2*N], p[2*N];
+                hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
+                constraints {
+                    link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
+                        else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
+                }
+            }
         }
-    }
+    };
 }
 
-constrained_system! {
-    /// A planar chain of 16 unit masses and rods, anchored at the origin.
-    pub struct Chain16 {
-        parameters { length, gravity }
-        const N = 16;
-        dof q[2*N], p[2*N];
-        hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
-        constraints {
-            link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
-                else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
-        }
-    }
-}
-
-constrained_system! {
-    /// A planar chain of 64 unit masses and rods, anchored at the origin.
-    pub struct Chain64 {
-        parameters { length, gravity }
-        const N = 64;
-        dof q[2*N], p[2*N];
-        hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
-        constraints {
-            link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
-                else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
-        }
-    }
-}
+chain!(
+    Chain4,
+    4,
+    "A planar chain of 4 unit masses and rods, anchored at the origin."
+);
+chain!(
+    Chain16,
+    16,
+    "A planar chain of 16 unit masses and rods, anchored at the origin."
+);
+chain!(
+    Chain64,
+    64,
+    "A planar chain of 64 unit masses and rods, anchored at the origin."
+);
 
 /// One system of any kind the package runs: declared from a string or
 /// compiled. Every variant is `Send + Sync` (ensembles share it).
