@@ -48,6 +48,7 @@
 // (the `models` below) with the macro too.
 extern crate self as shake;
 
+pub mod declared;
 pub mod models;
 pub mod prelude;
 

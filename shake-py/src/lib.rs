@@ -1,0 +1,706 @@
+//! `shake._shake`, the extension module behind the Python package `shake`:
+//! systems declared from strings (`shake::declared`) or compiled
+//! (`shake.models`), run by SHAKE or RATTLE over a base map, with NumPy
+//! arrays out and every failure a Python exception that carries the partial
+//! trajectory.
+
+mod models;
+
+use models::Model;
+use numpy::ndarray::{Array1, Array2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use shake::declared::{DeclareError, DeclaredSystem};
+use shake::{
+    BaseMap, ConstrainedSystem, Hamiltonian, ImplicitMidpoint, Integrator, Options, RunOutcome,
+    State, StepError, Stop, StormerVerlet, SymplecticEuler,
+};
+
+create_exception!(
+    _shake,
+    ShakeError,
+    PyException,
+    "Every error of shake. A run's errors carry `step`, `time`, `residual` (NaN when the error has none) and the partial trajectory (`trajectory`, `times`, `steps`, `lambda_`, `sigma`)."
+);
+create_exception!(
+    _shake,
+    DeclarationError,
+    ShakeError,
+    "A declaration refused: `message`, and `line`, `column` (1-based) of the offending token in the string."
+);
+create_exception!(
+    _shake,
+    ParameterError,
+    ShakeError,
+    "A parameter unknown, missing or given twice."
+);
+create_exception!(
+    _shake,
+    InvalidInputError,
+    ShakeError,
+    "An unusable argument: h = 0 or not finite, a state of the wrong dimension, ..."
+);
+create_exception!(
+    _shake,
+    NonFiniteError,
+    ShakeError,
+    "A state (given or computed) has a NaN or infinite entry."
+);
+create_exception!(
+    _shake,
+    NewtonError,
+    ShakeError,
+    "A Newton iteration did not converge (`residual` is its last residual)."
+);
+create_exception!(
+    _shake,
+    NondegeneracyError,
+    ShakeError,
+    "N = {{H,g_i},g_j} became singular or ill-conditioned (the paper's nondegeneracy assumption)."
+);
+create_exception!(
+    _shake,
+    ComponentJumpError,
+    ShakeError,
+    "det N changed sign: the trajectory jumped to another component of M^H (Section 5.4.2)."
+);
+create_exception!(
+    _shake,
+    FibreJumpError,
+    ShakeError,
+    "Newton along a fibre converged far from its linear prediction (a fold or another component)."
+);
+create_exception!(
+    _shake,
+    NotOnConstraintError,
+    ShakeError,
+    "The initial state is not on M = {g = 0} (`residual` is |g|)."
+);
+
+/// A constrained Hamiltonian system: declared from a string
+/// (`shake.declare`) or compiled (`shake.models`).
+#[pyclass(frozen, module = "shake")]
+struct System {
+    model: Model,
+    name: String,
+    parameters: Vec<(String, f64)>,
+}
+
+#[pymethods]
+impl System {
+    /// d, the number of coordinates (a state z = (q, p) has 2d entries).
+    #[getter]
+    fn dof(&self) -> usize {
+        with_model!(&self.model, s => s.dof())
+    }
+
+    /// m, the number of constraints.
+    #[getter]
+    fn constraint_count(&self) -> usize {
+        with_model!(&self.model, s => s.constraint_count())
+    }
+
+    /// The declared name.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// How g depends on z: "none", "holonomic", "quadratic" or "general".
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match with_model!(&self.model, s => s.kind()) {
+            shake::ConstraintKind::None => "none",
+            shake::ConstraintKind::Holonomic => "holonomic",
+            shake::ConstraintKind::Quadratic => "quadratic",
+            shake::ConstraintKind::General => "general",
+        }
+    }
+
+    /// True when the system is compiled (a `shake.models` class), False
+    /// when declared from a string and interpreted.
+    #[getter]
+    fn compiled(&self) -> bool {
+        !matches!(self.model, Model::Declared(_))
+    }
+
+    /// The parameters, by name.
+    #[getter]
+    fn parameters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (k, v) in &self.parameters {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
+    }
+
+    /// The constraint names (`rod`, `link[3]`).
+    #[getter]
+    fn constraint_names(&self) -> Vec<String> {
+        with_model!(&self.model, s => (0..s.constraint_count()).map(|i| s.constraint_name(i).to_string()).collect())
+    }
+
+    /// H(z) at a state z = (q, p) of length 2d.
+    fn hamiltonian(&self, z: PyReadonlyArray1<f64>) -> PyResult<f64> {
+        let (q, p) = self.split(&z)?;
+        Ok(with_model!(&self.model, s => s.hamiltonian(&q, &p)))
+    }
+
+    /// g(z), the m constraints at z = (q, p).
+    fn constraints<'py>(
+        &self,
+        py: Python<'py>,
+        z: PyReadonlyArray1<f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (q, p) = self.split(&z)?;
+        let mut g = vec![0.0; self.constraint_count()];
+        with_model!(&self.model, s => s.constraints(&q, &p, &mut g));
+        Ok(g.into_pyarray(py))
+    }
+
+    /// The hidden constraints {g_i, H}(z).
+    fn hidden_constraints<'py>(
+        &self,
+        py: Python<'py>,
+        z: PyReadonlyArray1<f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (q, p) = self.split(&z)?;
+        let mut g = vec![0.0; self.constraint_count()];
+        with_model!(&self.model, s => s.hidden_constraints(&q, &p, &mut g));
+        Ok(g.into_pyarray(py))
+    }
+
+    fn __repr__(&self) -> String {
+        let ps: Vec<String> = self
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        let how = if self.compiled() {
+            "compiled"
+        } else {
+            "declared"
+        };
+        format!(
+            "<shake.System {} ({how}, d={}, m={}, {})>",
+            self.name,
+            self.dof(),
+            self.constraint_count(),
+            ps.join(", ")
+        )
+    }
+}
+
+impl System {
+    fn split(&self, z: &PyReadonlyArray1<f64>) -> PyResult<(Vec<f64>, Vec<f64>)> {
+        let z = z.as_array();
+        let d = self.dof();
+        if z.len() != 2 * d {
+            return Err(InvalidInputError::new_err(format!(
+                "a state of {} has 2d = {} entries, not {}",
+                self.name,
+                2 * d,
+                z.len()
+            )));
+        }
+        let z: Vec<f64> = z.iter().copied().collect();
+        Ok((z[..d].to_vec(), z[d..].to_vec()))
+    }
+}
+
+/// Declares a system from a string in the grammar of `constrained_system!`
+/// (the `struct` with its body), with every parameter given by name.
+///
+/// The declaration goes through the macro's own checks (coisotropy,
+/// nondegeneracy, ...); a refusal raises `DeclarationError` with the macro's
+/// message and the line and column in the string.
+#[pyfunction]
+#[pyo3(signature = (source, **parameters))]
+fn declare(source: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<System> {
+    let mut given: Vec<(String, f64)> = Vec::new();
+    if let Some(ps) = parameters {
+        for (k, v) in ps.iter() {
+            given.push((k.extract()?, v.extract()?));
+        }
+    }
+    let refs: Vec<(&str, f64)> = given.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    let sys = DeclaredSystem::new(source, &refs).map_err(|e| match e {
+        DeclareError::Declaration(d) => Python::attach(|py| {
+            let err = DeclarationError::new_err(d.to_string());
+            let v = err.value(py);
+            let _ = v.setattr("message", d.message.clone());
+            let _ = v.setattr("line", d.line);
+            let _ = v.setattr("column", d.column);
+            err
+        }),
+        e => ParameterError::new_err(e.to_string()),
+    })?;
+    let parameters = sys
+        .parameter_names()
+        .iter()
+        .cloned()
+        .zip(sys.parameters().iter().copied())
+        .collect();
+    Ok(System {
+        name: sys.name().to_string(),
+        parameters,
+        model: Model::Declared(sys),
+    })
+}
+
+/// A compiled model of `shake.models` by name, parameters by name.
+#[pyfunction]
+#[pyo3(signature = (name, **parameters))]
+fn model(name: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<System> {
+    let spec = models::MODELS
+        .iter()
+        .find(|m| m.0 == name)
+        .ok_or_else(|| ParameterError::new_err(format!("no compiled model `{name}`")))?;
+    let mut given: Vec<(String, f64)> = Vec::new();
+    if let Some(ps) = parameters {
+        for (k, v) in ps.iter() {
+            let k: String = k.extract()?;
+            if !spec.1.contains(&k.as_str()) {
+                return Err(ParameterError::new_err(format!(
+                    "unknown parameter `{k}`; {name}'s parameters are: {}",
+                    spec.1.join(", ")
+                )));
+            }
+            given.push((k, v.extract()?));
+        }
+    }
+    let get = |n: &str| given.iter().find(|g| g.0 == n).map(|g| g.1);
+    let model = models::compiled(name, &get)
+        .map_err(ParameterError::new_err)?
+        .expect("listed in MODELS");
+    Ok(System {
+        model,
+        name: name.to_string(),
+        parameters: spec
+            .1
+            .iter()
+            .map(|n| (n.to_string(), get(n).unwrap_or(f64::NAN)))
+            .collect(),
+    })
+}
+
+/// The compiled models and their parameter names.
+#[pyfunction]
+fn model_names() -> Vec<(String, Vec<String>)> {
+    models::MODELS
+        .iter()
+        .map(|(n, ps)| (n.to_string(), ps.iter().map(|p| p.to_string()).collect()))
+        .collect()
+}
+
+/// What a run returns: NumPy arrays.
+#[pyclass(frozen, module = "shake", name = "Result")]
+struct Result_ {
+    /// The stored states, shape (n, 2d): q then p.
+    #[pyo3(get)]
+    trajectory: Py<PyArray2<f64>>,
+    /// Their times, shape (n,).
+    #[pyo3(get)]
+    times: Py<PyArray1<f64>>,
+    /// Their step indices, shape (n,).
+    #[pyo3(get)]
+    steps: Py<PyArray1<u64>>,
+    /// λ of the SHAKE step leaving each stored state, shape (n, m) (NaN for
+    /// the last state: no step leaves it). An impulse: for Störmer–Verlet
+    /// λ = (h/2) λ_c with the DAE's multiplier λ_c.
+    #[pyo3(get)]
+    lambda_: Py<PyArray2<f64>>,
+    /// σ of RATTLE's projection that gave each stored state, shape (n, m)
+    /// (zero for SHAKE).
+    #[pyo3(get)]
+    sigma: Py<PyArray2<f64>>,
+}
+
+#[pymethods]
+impl Result_ {
+    fn __len__(&self, py: Python<'_>) -> usize {
+        self.times.bind(py).len().unwrap_or(0)
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!("<shake.Result: {} states>", self.__len__(py))
+    }
+}
+
+/// A run's arrays, built without the GIL.
+struct Arrays {
+    trajectory: Array2<f64>,
+    times: Array1<f64>,
+    steps: Array1<u64>,
+    lambda: Array2<f64>,
+    sigma: Array2<f64>,
+}
+
+impl Arrays {
+    fn of(out: &RunOutcome, d: usize, m: usize, multipliers: bool) -> Arrays {
+        let t = &out.trajectory;
+        let n = t.len();
+        let mut z = Vec::with_capacity(n * 2 * d);
+        for i in 0..n {
+            z.extend_from_slice(t.q(i));
+            z.extend_from_slice(t.p(i));
+        }
+        let (mut lam, mut sig) = (Vec::with_capacity(n * m), Vec::with_capacity(n * m));
+        for i in 0..n {
+            if multipliers && m > 0 {
+                lam.extend_from_slice(t.lambda(i));
+                sig.extend_from_slice(t.sigma(i));
+            } else {
+                lam.resize(lam.len() + m, f64::NAN);
+                sig.resize(sig.len() + m, f64::NAN);
+            }
+        }
+        Arrays {
+            trajectory: Array2::from_shape_vec((n, 2 * d), z).expect("n·2d states"),
+            times: Array1::from(t.times()),
+            steps: Array1::from(t.steps()),
+            lambda: Array2::from_shape_vec((n, m), lam).expect("n·m"),
+            sigma: Array2::from_shape_vec((n, m), sig).expect("n·m"),
+        }
+    }
+
+    fn into_py(self, py: Python<'_>) -> Result_ {
+        Result_ {
+            trajectory: self.trajectory.into_pyarray(py).unbind(),
+            times: self.times.into_pyarray(py).unbind(),
+            steps: self.steps.into_pyarray(py).unbind(),
+            lambda_: self.lambda.into_pyarray(py).unbind(),
+            sigma: self.sigma.into_pyarray(py).unbind(),
+        }
+    }
+}
+
+/// The Python exception for a run's error, with the partial run attached.
+fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
+    let msg = e.to_string();
+    let nan = f64::NAN;
+    let (err, time, residual) = match e {
+        StepError::InvalidInput { .. } => (InvalidInputError::new_err(msg), nan, nan),
+        StepError::NonFinite { t, .. } => (NonFiniteError::new_err(msg), *t, nan),
+        StepError::NewtonNotConverged { t, source, .. } => {
+            let r = match source {
+                shake::SolveError::NotConverged { residual, .. } => *residual,
+                _ => nan,
+            };
+            (NewtonError::new_err(msg), *t, r)
+        }
+        StepError::NondegeneracyLost { t, .. } => (NondegeneracyError::new_err(msg), *t, nan),
+        StepError::ComponentJump { t, .. } => (ComponentJumpError::new_err(msg), *t, nan),
+        StepError::FibreJump { t, .. } => (FibreJumpError::new_err(msg), *t, nan),
+        StepError::NotOnConstraint { t, residual, .. } => {
+            (NotOnConstraintError::new_err(msg), *t, *residual)
+        }
+        #[allow(unreachable_patterns)]
+        _ => (ShakeError::new_err(msg), nan, nan),
+    };
+    let v = err.value(py);
+    let r = partial.into_py(py);
+    let _ = v.setattr("step", e.step());
+    let _ = v.setattr("time", time);
+    let _ = v.setattr("residual", residual);
+    let _ = v.setattr("trajectory", r.trajectory);
+    let _ = v.setattr("times", r.times);
+    let _ = v.setattr("steps", r.steps);
+    let _ = v.setattr("lambda_", r.lambda_);
+    let _ = v.setattr("sigma", r.sigma);
+    err
+}
+
+/// How to run: everything but the system and the initial states.
+#[derive(Clone)]
+struct Plan {
+    h: f64,
+    stop: Stop,
+    stride: u64,
+    rattle: bool,
+    project: bool,
+    multipliers: bool,
+    options: Options,
+}
+
+/// One run, or the error of projecting the initial state.
+fn run_one<S, B>(integ: &mut Integrator<S, B>, plan: &Plan, z0: &[f64]) -> RunOutcome
+where
+    S: ConstrainedSystem,
+    B: BaseMap,
+{
+    let d = integ.system().dof();
+    let mut z = State::from_slices(&z0[..d], &z0[d..]);
+    if plan.project {
+        let projected = if plan.rattle {
+            integ.project_to_hidden(&z)
+        } else {
+            integ.project(&z)
+        };
+        match projected {
+            Ok(p) => z = p,
+            Err(e) => {
+                return RunOutcome {
+                    trajectory: Default::default(),
+                    error: Some(e),
+                }
+            }
+        }
+    }
+    integ.run(z, plan.stop).stride(plan.stride).execute()
+}
+
+fn integrator<S: ConstrainedSystem, B: BaseMap>(s: S, base: B, plan: &Plan) -> Integrator<S, B> {
+    let i = Integrator::new(s, base, plan.h).with_options(plan.options);
+    let i = if plan.rattle { i.rattle() } else { i.shake() };
+    if plan.multipliers {
+        i.with_diagnostics()
+    } else {
+        i
+    }
+}
+
+/// Runs every initial state (rows of `z0s`) on all cores.
+fn run_all(model: &Model, base: &str, plan: &Plan, z0s: &[Vec<f64>]) -> Vec<RunOutcome> {
+    use shake::rayon::prelude::*;
+    macro_rules! go {
+        ($b:expr) => {
+            with_model!(model, s => {
+                let template = integrator(s.clone(), $b, plan);
+                if z0s.len() == 1 {
+                    vec![run_one(&mut template.clone(), plan, &z0s[0])]
+                } else {
+                    z0s.par_iter()
+                        .map_init(|| template.clone(), |integ, z0| run_one(integ, plan, z0))
+                        .collect()
+                }
+            })
+        };
+    }
+    match base {
+        "midpoint" => go!(ImplicitMidpoint),
+        "verlet" => go!(StormerVerlet),
+        _ => go!(SymplecticEuler),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn plan(
+    system: &System,
+    h: f64,
+    steps: Option<u64>,
+    time: Option<f64>,
+    method: &str,
+    base: &str,
+    stride: u64,
+    project: bool,
+    multipliers: bool,
+    constraint_tolerance: Option<f64>,
+    newton_tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+) -> PyResult<Plan> {
+    let stop = match (steps, time) {
+        (Some(n), None) => Stop::Steps(n),
+        (None, Some(t)) => Stop::Time(t),
+        _ => {
+            return Err(InvalidInputError::new_err(
+                "give exactly one of steps= and time=",
+            ))
+        }
+    };
+    let rattle = match method {
+        "rattle" => true,
+        "shake" => false,
+        _ => {
+            return Err(InvalidInputError::new_err(format!(
+                "method must be \"rattle\" or \"shake\", not {method:?}"
+            )))
+        }
+    };
+    if !matches!(base, "midpoint" | "verlet" | "euler") {
+        return Err(InvalidInputError::new_err(format!(
+            "base must be \"midpoint\", \"verlet\" or \"euler\", not {base:?}"
+        )));
+    }
+    let _ = system;
+    let mut options = Options::default();
+    if let Some(t) = constraint_tolerance {
+        options.constraint_tolerance = t;
+    }
+    if let Some(t) = newton_tolerance {
+        options.newton.step_tolerance = t;
+    }
+    if let Some(n) = max_iterations {
+        options.newton.max_iterations = n;
+    }
+    Ok(Plan {
+        h,
+        stop,
+        stride,
+        rattle,
+        project,
+        multipliers,
+        options,
+    })
+}
+
+fn rows(system: &System, z: &[f64], n: usize) -> PyResult<Vec<Vec<f64>>> {
+    let d2 = 2 * system.dof();
+    if z.len() != n * d2 {
+        return Err(InvalidInputError::new_err(format!(
+            "states of {} have 2d = {d2} entries",
+            system.name
+        )));
+    }
+    Ok(z.chunks(d2.max(1)).map(<[f64]>::to_vec).collect())
+}
+
+/// Runs SHAKE or RATTLE from `z0` (length 2d: q then p) with step size `h`
+/// for `steps` steps or until `time`, keeping every `stride`-th state.
+///
+/// `base` is the base map: "midpoint" (implicit midpoint), "verlet"
+/// (Störmer–Verlet) or "euler" (symplectic Euler). With `project` the
+/// initial state is first projected onto M^H (RATTLE) or M (SHAKE). With
+/// `multipliers` the result carries λ and σ. A failure raises a subclass of
+/// `ShakeError` carrying the step, time, residual and partial trajectory.
+#[pyfunction]
+#[pyo3(signature = (system, z0, h, *, steps=None, time=None, method="rattle", base="midpoint",
+    stride=1, project=true, multipliers=true, constraint_tolerance=None, newton_tolerance=None,
+    max_iterations=None))]
+#[allow(clippy::too_many_arguments)]
+fn run(
+    py: Python<'_>,
+    system: &System,
+    z0: PyReadonlyArray1<f64>,
+    h: f64,
+    steps: Option<u64>,
+    time: Option<f64>,
+    method: &str,
+    base: &str,
+    stride: u64,
+    project: bool,
+    multipliers: bool,
+    constraint_tolerance: Option<f64>,
+    newton_tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+) -> PyResult<Result_> {
+    let plan = plan(
+        system,
+        h,
+        steps,
+        time,
+        method,
+        base,
+        stride,
+        project,
+        multipliers,
+        constraint_tolerance,
+        newton_tolerance,
+        max_iterations,
+    )?;
+    let z0 = rows(
+        system,
+        &z0.as_array().iter().copied().collect::<Vec<_>>(),
+        1,
+    )?;
+    let (d, m) = (system.dof(), system.constraint_count());
+    let mut outs = py.detach(|| run_all(&system.model, base, &plan, &z0));
+    let out = outs.pop().expect("one run");
+    let arrays = Arrays::of(&out, d, m, plan.multipliers);
+    match &out.error {
+        Some(e) => Err(step_error(py, e, arrays)),
+        None => Ok(arrays.into_py(py)),
+    }
+}
+
+/// Runs every row of `z0s` (shape (k, 2d)) as `run` does, in parallel on
+/// all cores with the GIL released. Returns one `Result` per row, or, with
+/// `errors="return"`, a failed member's `ShakeError` in its place (the
+/// default, `errors="raise"`, raises the first failure).
+#[pyfunction]
+#[pyo3(signature = (system, z0s, h, *, steps=None, time=None, method="rattle", base="midpoint",
+    stride=1, project=true, multipliers=true, constraint_tolerance=None, newton_tolerance=None,
+    max_iterations=None, errors="raise"))]
+#[allow(clippy::too_many_arguments)]
+fn ensemble(
+    py: Python<'_>,
+    system: &System,
+    z0s: PyReadonlyArray2<f64>,
+    h: f64,
+    steps: Option<u64>,
+    time: Option<f64>,
+    method: &str,
+    base: &str,
+    stride: u64,
+    project: bool,
+    multipliers: bool,
+    constraint_tolerance: Option<f64>,
+    newton_tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+    errors: &str,
+) -> PyResult<Vec<Py<PyAny>>> {
+    let plan = plan(
+        system,
+        h,
+        steps,
+        time,
+        method,
+        base,
+        stride,
+        project,
+        multipliers,
+        constraint_tolerance,
+        newton_tolerance,
+        max_iterations,
+    )?;
+    let a = z0s.as_array();
+    let k = a.nrows();
+    let z0s = rows(system, &a.iter().copied().collect::<Vec<_>>(), k)?;
+    let (d, m) = (system.dof(), system.constraint_count());
+    let outs = py.detach(|| run_all(&system.model, base, &plan, &z0s));
+    let mut results = Vec::with_capacity(k);
+    for out in &outs {
+        let arrays = Arrays::of(out, d, m, plan.multipliers);
+        match &out.error {
+            Some(e) => {
+                let err = step_error(py, e, arrays);
+                if errors == "return" {
+                    results.push(err.value(py).clone().into_any().unbind());
+                } else {
+                    return Err(err);
+                }
+            }
+            None => results.push(Py::new(py, arrays.into_py(py))?.into_any()),
+        }
+    }
+    Ok(results)
+}
+
+#[pymodule]
+fn _shake(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add_class::<System>()?;
+    m.add_class::<Result_>()?;
+    m.add_function(wrap_pyfunction!(declare, m)?)?;
+    m.add_function(wrap_pyfunction!(model, m)?)?;
+    m.add_function(wrap_pyfunction!(model_names, m)?)?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(ensemble, m)?)?;
+    m.add("ShakeError", py.get_type::<ShakeError>())?;
+    m.add("DeclarationError", py.get_type::<DeclarationError>())?;
+    m.add("ParameterError", py.get_type::<ParameterError>())?;
+    m.add("InvalidInputError", py.get_type::<InvalidInputError>())?;
+    m.add("NonFiniteError", py.get_type::<NonFiniteError>())?;
+    m.add("NewtonError", py.get_type::<NewtonError>())?;
+    m.add("NondegeneracyError", py.get_type::<NondegeneracyError>())?;
+    m.add("ComponentJumpError", py.get_type::<ComponentJumpError>())?;
+    m.add("FibreJumpError", py.get_type::<FibreJumpError>())?;
+    m.add(
+        "NotOnConstraintError",
+        py.get_type::<NotOnConstraintError>(),
+    )?;
+    Ok(())
+}
