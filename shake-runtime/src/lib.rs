@@ -42,7 +42,8 @@
 //! - [`fibre`]: the fibre flows exp(Σ λ_i X_{g_i}), exact to round-off.
 //! - [`newton`]: every implicit equation is solved to round-off.
 //! - [`diagnostics`] and [`error`]: what a run measures, and how it fails.
-//! - [`io`]: a trajectory as CSV and back.
+//! - [`io`]: a trajectory as CSV and back; with the `arrow` feature,
+//!   `io_arrow`: as an Arrow IPC (Feather v2) file and back.
 #![warn(missing_docs)]
 // Numerical kernels index several arrays with one loop variable, as the
 // formulas do; iterator chains would hide them.
@@ -64,6 +65,8 @@ pub mod examples;
 pub mod fibre;
 pub mod integrator;
 pub mod io;
+#[cfg(feature = "arrow")]
+pub mod io_arrow;
 mod linalg;
 pub mod newton;
 pub mod particles;
