@@ -49,6 +49,8 @@
 extern crate self as shake;
 
 pub mod models;
+#[cfg(feature = "plot")]
+pub mod plot;
 pub mod prelude;
 
 pub use shake_macros::constrained_system;
