@@ -461,6 +461,8 @@ impl Chart {
             .collect();
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         for &(x, lo, hi) in drawn.iter().flatten() {
+            // Dots draw a column's largest value only.
+            let lo = if self.look == Look::Dots { hi } else { lo };
             (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(lo), y1.max(hi));
         }
         let pad = |a: f64, b: f64, f: f64| {
@@ -530,6 +532,11 @@ impl Chart {
                         PathElement::new(vec![(x, lo), (x, hi)], color.stroke_width(1))
                     }))
                     .map_err(e)?,
+                // A dense orbit as points: chords between stored states
+                // would cut its corners and thicken it into a band.
+                (Look::Lines, _) if cols.len() > 4 * n_columns => chart
+                    .draw_series(cols.iter().map(|&(x, y, _)| Pixel::new((x, y), color)))
+                    .map_err(e)?,
                 _ => chart
                     .draw_series(LineSeries::new(
                         cols.iter().map(|&(x, y, _)| (x, y)),
@@ -563,7 +570,20 @@ impl Chart {
             .position(SeriesLabelPosition::UpperRight)
             .draw()
             .map_err(e)?;
-        if let Some(note) = &self.note {
+        let limit = if self.look == Look::Lines {
+            4 * n_columns
+        } else {
+            n_columns
+        };
+        let dense = self.curves.iter().any(|c| c.points.len() > limit);
+        let how = match self.look {
+            _ if !dense => "",
+            Look::Lines => "; drawn as points",
+            Look::Bands => "; per pixel column: least to largest value",
+            Look::Dots => "; per pixel column: largest value",
+        };
+        let note = self.note.as_ref().map(|n| format!("{n}{how}"));
+        if let Some(note) = &note {
             // Below the axis, at the left: it never covers data.
             let font: TextStyle = ("sans-serif", 15).into_font().color(&RGBColor(80, 80, 80));
             let y = SIZE.1 as i32 - 24;
