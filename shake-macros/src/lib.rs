@@ -1,21 +1,21 @@
 //! The `constrained_system!` macro of `shake`.
 //!
-//! The expansion reads top-down: `parse` the declaration into a typed view
-//! that keeps the user's spans, `lower` it into the hash-consed expression
-//! graph of `symbolic` (kept canonical by `simplify`), differentiate it
-//! (`diff`), `check` the paper's assumptions, then `emit` straight-line code,
-//! scheduled by `cse`. See [`constrained_system!`] for the grammar.
+//! A thin shell over `shake-symbolic`, which holds the front end: `parse`
+//! the declaration into a typed view that keeps the user's spans, `lower` it
+//! into the hash-consed expression graph of `symbolic` (kept canonical by
+//! `simplify`), differentiate it (`diff`), `check` the paper's assumptions.
+//! This crate turns the result into tokens: `emit` straight-line code,
+//! scheduled by `cse`; `topology` does the same for particle systems. See
+//! [`constrained_system!`] for the grammar.
 
-mod check;
 mod cse;
-mod diff;
 mod emit;
-mod lower;
-mod parse;
-mod parse_topology;
-mod simplify;
-mod symbolic;
 mod topology;
+
+// The front end's modules under their old paths (`crate::diff::Derived`).
+#[cfg(test)]
+use shake_symbolic::check;
+use shake_symbolic::{diff, lower, parse, parse_topology, simplify, symbolic};
 
 #[cfg(test)]
 mod fuzz_tests;
@@ -365,31 +365,15 @@ fn expand(input: TokenStream2) -> TokenStream2 {
         let fallback = emit::fallback(&def);
         quote!(#(#errs)* #fallback)
     };
-    let mut sys = match lower::lower(&def) {
-        Ok(s) => s,
+    let analysis = match shake_symbolic::analyse(&def) {
+        Ok(a) => a,
         Err(es) => return errors(es),
     };
-    if let Some(e) = too_many_constraints(&sys) {
-        return errors(vec![e]);
-    }
-    let g: Vec<_> = sys.constraints.iter().map(|c| c.node).collect();
-    let der = diff::Derived::compute(&mut sys.graph, sys.dof, sys.hamiltonian, &g);
-    if let Err(es) = check::check(&mut sys, &der) {
-        return errors(es);
-    }
-    let doc = system_doc(&sys, &der);
+    let (sys, der) = &analysis.checked;
+    let doc = system_doc(sys, der);
     let items = emit::struct_items(&def, &doc);
-    // Values from the factored graph (accurate), structure from the checked
-    // canonical one.
-    let factored = lower::lower_with(&def, true).ok().and_then(|mut fs| {
-        let g: Vec<_> = fs.constraints.iter().map(|c| c.node).collect();
-        let values = diff::Derived::compute(&mut fs.graph, fs.dof, fs.hamiltonian, &g);
-        diff::aligned(&der, &sys.graph, values, &mut fs.graph).map(|d| (fs, d))
-    });
-    let impls = match &factored {
-        Some((fs, fd)) => emit::impls(&def, fs, fd),
-        None => emit::impls(&def, &sys, &der),
-    };
+    let (vs, vd) = analysis.values();
+    let impls = emit::impls(&def, vs, vd);
     quote!(#items #impls)
 }
 
@@ -424,27 +408,4 @@ fn system_doc(sys: &lower::System, der: &diff::Derived) -> String {
         ));
     }
     doc
-}
-
-/// Refuses m > d before anything is differentiated (checking such a system
-/// pair by pair is O(m²) work for nothing): on M the gradients of
-/// constraints whose brackets vanish span an isotropic subspace of R^{2d},
-/// of dimension at most d, so with m > d either the constraints are not
-/// coisotropic or g_z has rank < m, and N = ({{H,g_i},g_j}) is singular.
-fn too_many_constraints(sys: &lower::System) -> Option<syn::Error> {
-    let (m, d) = (sys.declared, sys.dof);
-    (m > d).then(|| {
-        let c = &sys.constraints[d];
-        syn::Error::new(
-            c.span,
-            format!(
-                "{m} constraints on {d} coordinates: more constraints than coordinates (m > d), \
-                 from `{}` on. Constraints that Poisson-commute on M have gradients spanning an \
-                 isotropic subspace, of dimension at most d, so N = {{{{H,g_i}},g_j}} (m×m) can \
-                 never be invertible: the system violates the paper's coisotropy or \
-                 nondegeneracy assumption (Sections 3.2 and 5.2) whatever the constraints are",
-                c.name
-            ),
-        )
-    })
 }

@@ -24,15 +24,15 @@ use std::fmt::Write as _;
 
 /// A node of the graph. Children have smaller ids (see the module doc).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct NodeId(pub(crate) u32);
+pub struct NodeId(pub u32);
 
 /// A state variable: z_k, with k < d for q_k and k ≥ d for p_{k−d}.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct VarId(pub(crate) u32);
+pub struct VarId(pub u32);
 
 /// A runtime parameter (an `f64` field of the declared struct).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct ParamId(pub(crate) u32);
+pub struct ParamId(pub u32);
 
 impl NodeId {
     pub fn index(self) -> usize {
@@ -129,7 +129,7 @@ pub struct Graph {
     /// The length of the longest path from the node down to a leaf.
     height: Vec<u32>,
     memo: HashMap<Node, NodeId>,
-    pub(crate) diff_memo: HashMap<(NodeId, VarId), NodeId>,
+    pub diff_memo: HashMap<(NodeId, VarId), NodeId>,
     pub names: Names,
     /// The graph of the emitted values: products and powers of sums stay as
     /// written (see `simplify`), for accuracy; `false` in the graph the
@@ -137,7 +137,7 @@ pub struct Graph {
     pub factored: bool,
 }
 
-pub(crate) fn bits(x: f64) -> u64 {
+pub fn bits(x: f64) -> u64 {
     if x == 0.0 {
         0
     } else {
@@ -173,7 +173,7 @@ impl Graph {
     }
 
     /// The number of nodes.
-    #[cfg(test)]
+    #[allow(clippy::len_without_is_empty)]
     pub fn len(&self) -> usize {
         self.nodes.len()
     }
@@ -201,7 +201,7 @@ impl Graph {
 
     /// Interns a node that is already in canonical form (the constructors in
     /// `simplify` are the only callers outside this module).
-    pub(crate) fn intern(&mut self, node: Node) -> NodeId {
+    pub fn intern(&mut self, node: Node) -> NodeId {
         if let Some(&id) = self.memo.get(&node) {
             return id;
         }

@@ -13,7 +13,7 @@ impl Graph {
     /// ∂x/∂z_v, simplified.
     ///
     /// The derivatives of the descendants are computed first, in post-order
-    /// with an explicit stack, so the recursion of [`Graph::diff_node`]
+    /// with an explicit stack, so the recursion of `Graph::diff_node`
     /// meets only memoised children: the depth of the graph (a chain of
     /// 2·10⁴ `let`s) never reaches the machine stack.
     pub fn diff(&mut self, x: NodeId, v: VarId) -> NodeId {

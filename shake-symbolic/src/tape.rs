@@ -1,0 +1,655 @@
+//! A compact evaluator for run-time declarations: the CSE'd expression DAG
+//! of each function the macro would emit, compiled into a flat instruction
+//! array over a register file.
+//!
+//! # Layout
+//!
+//! Registers `0..d` hold q, `d..2d` hold p, `2d..2d+m` hold λ, then come the
+//! parameters and the constants (the *statics*, copied in at each call),
+//! then one register per computed node. Hash-consing already made every
+//! shared subexpression one node, so, as for the macro's `let`s, a function
+//! is scheduled by collecting the nodes its outputs reach and computing
+//! each once, by increasing id (a topological order, by the graph's
+//! invariant).
+//!
+//! # Same numbers as the macro
+//!
+//! Each node is evaluated with the same operations in the same order as the
+//! code `constrained_system!` emits for it (sums and products left to right,
+//! the coefficient first, negative powers collected into one denominator,
+//! x² as x·x, x^n as `powi`, x^½ as `sqrt`): a string-declared system and
+//! the macro-declared one compute the same `f64`s.
+//!
+//! # Cost
+//!
+//! Evaluation allocates nothing: registers live in a per-thread scratch
+//! buffer that grows to the largest tape once.
+
+use crate::diff::{Derived, Kind};
+use crate::lower::System;
+use crate::symbolic::{Func, Graph, Node, NodeId};
+use std::cell::RefCell;
+use std::collections::{BTreeSet, HashMap};
+
+/// One instruction: `dst = f(a, b)` on registers.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum Op {
+    /// r[d] = r[a] + r[b]
+    Add(u32, u32, u32),
+    /// r[d] = r[a] · r[b]
+    Mul(u32, u32, u32),
+    /// r[d] = r[a] / r[b]
+    Div(u32, u32, u32),
+    /// r[d] = −r[a]
+    Neg(u32, u32),
+    /// r[d] = r[a]^n
+    Powi(u32, u32, i32),
+    /// r[d] = r[a]^r[b]
+    Powf(u32, u32, u32),
+    /// r[d] = √r[a]
+    Sqrt(u32, u32),
+    /// r[d] = f(r[a])
+    Call(u32, Func, u32),
+}
+
+/// The straight-line program of one function: instructions, then outputs
+/// `(index, register)` read off the register file.
+#[derive(Clone, Debug, Default)]
+pub struct Tape {
+    ops: Vec<Op>,
+    outs: Vec<(u32, u32)>,
+    regs: usize,
+}
+
+impl Tape {
+    /// The number of instructions.
+    pub fn len(&self) -> usize {
+        self.ops.len()
+    }
+
+    /// True when the function is only copies (constants, inputs).
+    pub fn is_empty(&self) -> bool {
+        self.ops.is_empty()
+    }
+
+    /// The output indices written, in order.
+    pub fn outputs(&self) -> impl Iterator<Item = usize> + '_ {
+        self.outs.iter().map(|o| o.0 as usize)
+    }
+}
+
+/// Every function of a declared system, compiled, with its statics.
+///
+/// Output layouts are the runtime's (`shake-runtime/src/system.rs`):
+/// column-major, q-columns before p-columns, only structurally nonzero
+/// entries written.
+#[derive(Clone, Debug)]
+pub struct Program {
+    dof: usize,
+    m: usize,
+    n_params: usize,
+    /// Parameters then constants, copied to registers `2d + m ..`.
+    statics: Vec<f64>,
+    /// H (one output, index 0).
+    pub hamiltonian: Tape,
+    /// ∂H/∂q (d outputs).
+    pub grad_q: Tape,
+    /// ∂H/∂p (d outputs).
+    pub grad_p: Tape,
+    /// ∇H: index k < d is ∂H/∂q_k, d + k is ∂H/∂p_k (shared subexpressions).
+    pub gradient: Tape,
+    /// H_zz (2d × 2d).
+    pub hessian: Tape,
+    /// g (m).
+    pub constraints: Tape,
+    /// g_z (m × 2d).
+    pub jacobian: Tape,
+    /// Σ λ_i ∇²g_i (2d × 2d).
+    pub constraint_hessian: Tape,
+    /// {g_i, H} (m).
+    pub hidden: Tape,
+    /// The Jacobian of {g_i, H} (m × 2d).
+    pub hidden_jacobian: Tape,
+    /// N_ij = {{H,g_i},g_j} (m × m).
+    pub nondegeneracy: Tape,
+    /// For holonomic g: (k, Σ_i λ_i ∂g_i/∂q_k), the fibre flow's momentum
+    /// kick p_k ← p_k − value (Section 5.1).
+    pub kick: Option<Tape>,
+    /// How g depends on z.
+    pub kind: Kind,
+    /// H = T(p) + V(q).
+    pub separable: bool,
+    /// H = ½ pᵀAp + V(q), A constant.
+    pub quadratic_kinetic: bool,
+    /// The structurally nonzero (i, k) of g_z, sorted by i then k.
+    pub jacobian_pattern: Vec<(usize, usize)>,
+    /// The constraint names (`rod`, `link[3]`).
+    pub constraint_names: Vec<String>,
+}
+
+thread_local! {
+    /// The register file, per thread, grown once to the largest tape.
+    static REGISTERS: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
+}
+
+struct Compiler<'a> {
+    graph: &'a Graph,
+    dof: usize,
+    m: usize,
+    n_params: usize,
+    statics: Vec<f64>,
+    consts: HashMap<u64, u32>,
+}
+
+impl Compiler<'_> {
+    fn base(&self) -> usize {
+        2 * self.dof + self.m
+    }
+
+    fn constant(&mut self, x: f64) -> u32 {
+        let base = self.base();
+        let statics = &mut self.statics;
+        *self.consts.entry(x.to_bits()).or_insert_with(|| {
+            statics.push(x);
+            (base + statics.len() - 1) as u32
+        })
+    }
+
+    /// The register of a leaf (inputs and statics), `None` for a computed
+    /// node.
+    fn leaf(&mut self, id: NodeId) -> Option<u32> {
+        match self.graph.node(id) {
+            Node::Const(b) => Some(self.constant(f64::from_bits(*b))),
+            Node::Var(v) => Some(v.0),
+            Node::Lambda(i) => Some((2 * self.dof) as u32 + i),
+            Node::Param(p) => Some((self.base() + p.0 as usize) as u32),
+            _ => None,
+        }
+    }
+
+    /// The nodes a node's evaluation reads. A product reads the bases of its
+    /// negative powers (they go to the denominator), as the macro's code does.
+    fn deps(&self, id: NodeId) -> Vec<NodeId> {
+        match self.graph.node(id) {
+            Node::Mul(fs) => fs
+                .iter()
+                .map(|f| match self.graph.node(*f) {
+                    Node::Pow(b, n) if *n < 0 => *b,
+                    _ => *f,
+                })
+                .collect(),
+            n => n.children().to_vec(),
+        }
+    }
+
+    fn tape(&mut self, entries: &[(usize, NodeId)]) -> Tape {
+        let mut needed = BTreeSet::new();
+        let mut stack: Vec<NodeId> = entries.iter().map(|e| e.1).collect();
+        while let Some(id) = stack.pop() {
+            if needed.insert(id) {
+                stack.extend(self.deps(id));
+            }
+        }
+        let mut em = Emitter {
+            ops: Vec::new(),
+            next: 0,
+            reg: HashMap::new(),
+        };
+        let mut tape = Tape::default();
+        for &id in &needed {
+            if let Some(r) = self.leaf(id) {
+                em.reg.insert(id, r);
+            }
+        }
+        // Temporaries go past the statics, whose count is only final once
+        // every tape is compiled: numbered from `TEMP`, shifted by `shift`.
+        for &id in &needed {
+            if !em.reg.contains_key(&id) {
+                let r = self.node(&mut em, id);
+                em.reg.insert(id, r);
+            }
+        }
+        tape.ops = em.ops;
+        tape.outs = entries
+            .iter()
+            .map(|&(i, id)| (i as u32, em.reg[&id]))
+            .collect();
+        tape.regs = em.next as usize;
+        tape
+    }
+
+    /// Emits node `id` (its operands already have registers).
+    fn node(&mut self, em: &mut Emitter, id: NodeId) -> u32 {
+        match self.graph.node(id).clone() {
+            Node::Add(ts) => {
+                let mut acc = em.reg[&ts[0]];
+                for t in ts[1..].iter() {
+                    acc = em.op2(Op::Add, acc, em.reg[t]);
+                }
+                acc
+            }
+            Node::Mul(fs) => {
+                let mut coef = 1.0;
+                let mut num = Vec::new();
+                let mut den = Vec::new();
+                for f in fs.iter() {
+                    match self.graph.node(*f) {
+                        Node::Const(b) => coef = f64::from_bits(*b),
+                        Node::Pow(b, n) if *n < 0 => den.push((*b, -n)),
+                        _ => num.push(em.reg[f]),
+                    }
+                }
+                if coef.abs() != 1.0 || num.is_empty() {
+                    num.insert(0, self.constant(coef.abs()));
+                }
+                let mut e = num[0];
+                for &f in &num[1..] {
+                    e = em.op2(Op::Mul, e, f);
+                }
+                if !den.is_empty() {
+                    let mut d = self.power(em, den[0].0, den[0].1);
+                    for &(b, n) in &den[1..] {
+                        let f = self.power(em, b, n);
+                        d = em.op2(Op::Mul, d, f);
+                    }
+                    e = em.op2(Op::Div, e, d);
+                }
+                if coef < 0.0 {
+                    e = em.op1(Op::Neg, e);
+                }
+                e
+            }
+            Node::Pow(b, n) => self.power(em, b, n),
+            Node::PowF(b, r) => {
+                let r = f64::from_bits(r);
+                let x = em.reg[&b];
+                if r == 0.5 {
+                    em.op1(Op::Sqrt, x)
+                } else if r == -0.5 {
+                    let s = em.op1(Op::Sqrt, x);
+                    let one = self.constant(1.0);
+                    em.op2(Op::Div, one, s)
+                } else {
+                    let e = self.constant(r);
+                    em.op2(Op::Powf, x, e)
+                }
+            }
+            Node::Call(f, x) => {
+                let x = em.reg[&x];
+                em.op1(|d, a| Op::Call(d, f, a), x)
+            }
+            Node::Const(_) | Node::Var(_) | Node::Param(_) | Node::Lambda(_) => {
+                unreachable!("leaves have registers")
+            }
+        }
+    }
+
+    /// b^n as the macro writes it: b·b, b·b·b, `powi`, 1/(b^−n).
+    fn power(&mut self, em: &mut Emitter, base: NodeId, n: i32) -> u32 {
+        let b = em.reg[&base];
+        match n {
+            1 => b,
+            2 => em.op2(Op::Mul, b, b),
+            3 => {
+                let s = em.op2(Op::Mul, b, b);
+                em.op2(Op::Mul, s, b)
+            }
+            n if n < 0 => {
+                let d = self.power(em, base, -n);
+                let one = self.constant(1.0);
+                em.op2(Op::Div, one, d)
+            }
+            n => em.op1(|d, a| Op::Powi(d, a, n), b),
+        }
+    }
+}
+
+/// Temporaries of one tape, numbered from `TEMP` (shifted past the statics
+/// once they are all known).
+struct Emitter {
+    ops: Vec<Op>,
+    next: u32,
+    reg: HashMap<NodeId, u32>,
+}
+
+/// Temporaries are numbered from here until the statics are known.
+const TEMP: u32 = 1 << 31;
+
+impl Emitter {
+    fn fresh(&mut self) -> u32 {
+        self.next += 1;
+        TEMP + self.next - 1
+    }
+    fn op2(&mut self, f: fn(u32, u32, u32) -> Op, a: u32, b: u32) -> u32 {
+        let d = self.fresh();
+        self.ops.push(f(d, a, b));
+        d
+    }
+    fn op1(&mut self, f: impl FnOnce(u32, u32) -> Op, a: u32) -> u32 {
+        let d = self.fresh();
+        self.ops.push(f(d, a));
+        d
+    }
+}
+
+/// Renumbers a tape's temporaries to start at `first`.
+fn shift(tape: &mut Tape, first: u32) {
+    let s = |r: &mut u32| {
+        if *r >= TEMP {
+            *r = *r - TEMP + first;
+        }
+    };
+    for op in &mut tape.ops {
+        match op {
+            Op::Add(d, a, b) | Op::Mul(d, a, b) | Op::Div(d, a, b) | Op::Powf(d, a, b) => {
+                s(d);
+                s(a);
+                s(b);
+            }
+            Op::Neg(d, a) | Op::Powi(d, a, _) | Op::Sqrt(d, a) | Op::Call(d, _, a) => {
+                s(d);
+                s(a);
+            }
+        }
+    }
+    for o in &mut tape.outs {
+        s(&mut o.1);
+    }
+    tape.regs += first as usize;
+}
+
+/// Upper-triangle entries (a, b) of an n×n symmetric matrix, written to
+/// both (a, b) and (b, a), column-major.
+fn symmetric(entries: &[((usize, usize), NodeId)], n: usize) -> Vec<(usize, NodeId)> {
+    let mut out = Vec::new();
+    for &((a, b), node) in entries {
+        out.push((a + b * n, node));
+        if a != b {
+            out.push((b + a * n, node));
+        }
+    }
+    out
+}
+
+impl Program {
+    /// Compiles every function of a checked system (`sys` and `der` as
+    /// returned by [`crate::Analysis::values`]), with parameter values in
+    /// declaration order.
+    pub fn compile(sys: &System, der: &Derived, params: &[f64]) -> Program {
+        let (d, m) = (sys.dof, der.g.len());
+        let n2 = 2 * d;
+        let mut c = Compiler {
+            graph: &sys.graph,
+            dof: d,
+            m,
+            n_params: sys.params.len(),
+            statics: params.to_vec(),
+            consts: HashMap::new(),
+        };
+        debug_assert_eq!(params.len(), c.n_params);
+        let h_q: Vec<_> = der.h_z.iter().filter(|e| e.0 < d).copied().collect();
+        let h_p: Vec<_> = der
+            .h_z
+            .iter()
+            .filter(|e| e.0 >= d)
+            .map(|e| (e.0 - d, e.1))
+            .collect();
+        let hamiltonian = c.tape(&[(0, sys.hamiltonian)]);
+        let grad_q = c.tape(&h_q);
+        let grad_p = c.tape(&h_p);
+        let gradient = c.tape(&der.h_z);
+        let hessian = c.tape(&symmetric(&der.h_zz, n2));
+        let g: Vec<_> = der.g.iter().copied().enumerate().collect();
+        let constraints = c.tape(&g);
+        let jac: Vec<_> = der.g_z.iter().map(|((i, k), n)| (i + k * m, *n)).collect();
+        let jacobian = c.tape(&jac);
+        let constraint_hessian = c.tape(&symmetric(&der.g_hess, n2));
+        let hid: Vec<_> = der
+            .hidden
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|(_, n)| !sys.graph.is_zero(*n))
+            .collect();
+        let hidden = c.tape(&hid);
+        let hz: Vec<_> = der
+            .hidden_z
+            .iter()
+            .map(|((i, k), n)| (i + k * m, *n))
+            .collect();
+        let hidden_jacobian = c.tape(&hz);
+        let mut n_entries = Vec::new();
+        for (i, row) in der.n.iter().enumerate() {
+            for (j, &nij) in row.iter().enumerate() {
+                if !sys.graph.is_zero(nij) {
+                    n_entries.push((i + j * m, nij));
+                }
+            }
+        }
+        let nondegeneracy = c.tape(&n_entries);
+        let kick = (der.kind == Kind::Holonomic).then(|| c.tape(&der.kick));
+        let first = (c.base() + c.statics.len()) as u32;
+        let mut p = Program {
+            dof: d,
+            m,
+            n_params: c.n_params,
+            statics: c.statics,
+            hamiltonian,
+            grad_q,
+            grad_p,
+            gradient,
+            hessian,
+            constraints,
+            jacobian,
+            constraint_hessian,
+            hidden,
+            hidden_jacobian,
+            nondegeneracy,
+            kick,
+            kind: der.kind,
+            separable: der.separable,
+            quadratic_kinetic: der.quadratic_kinetic,
+            jacobian_pattern: der.g_z.iter().map(|e| e.0).collect(),
+            constraint_names: sys.constraints.iter().map(|c| c.name.clone()).collect(),
+        };
+        for t in p.tapes_mut() {
+            shift(t, first);
+            check_registers(t);
+        }
+        p
+    }
+
+    fn tapes_mut(&mut self) -> impl Iterator<Item = &mut Tape> {
+        [
+            &mut self.hamiltonian,
+            &mut self.grad_q,
+            &mut self.grad_p,
+            &mut self.gradient,
+            &mut self.hessian,
+            &mut self.constraints,
+            &mut self.jacobian,
+            &mut self.constraint_hessian,
+            &mut self.hidden,
+            &mut self.hidden_jacobian,
+            &mut self.nondegeneracy,
+        ]
+        .into_iter()
+        .chain(self.kick.as_mut())
+    }
+
+    /// d.
+    pub fn dof(&self) -> usize {
+        self.dof
+    }
+
+    /// m.
+    pub fn constraint_count(&self) -> usize {
+        self.m
+    }
+
+    /// The parameter values, in declaration order.
+    pub fn parameters(&self) -> &[f64] {
+        &self.statics[..self.n_params]
+    }
+
+    /// Sets parameter `i` (declaration order).
+    pub fn set_parameter(&mut self, i: usize, value: f64) {
+        self.statics[..self.n_params][i] = value;
+    }
+
+    /// Runs `tape` at (q, p, λ) and hands each output `(index, value)` to
+    /// `out`. `p` and `lambda` may be shorter (empty) when the tape does not
+    /// read them (the holonomic kick reads q and λ only).
+    #[inline]
+    pub fn eval(
+        &self,
+        tape: &Tape,
+        q: &[f64],
+        p: &[f64],
+        lambda: &[f64],
+        mut out: impl FnMut(usize, f64),
+    ) {
+        REGISTERS.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut r) => {
+                if r.len() < tape.regs {
+                    r.resize(tape.regs, 0.0);
+                }
+                self.run(tape, q, p, lambda, &mut r, &mut out);
+            }
+            // Re-entered from `out`: a buffer of its own.
+            Err(_) => self.run(tape, q, p, lambda, &mut vec![0.0; tape.regs], &mut out),
+        });
+    }
+
+    #[inline]
+    fn run(
+        &self,
+        tape: &Tape,
+        q: &[f64],
+        p: &[f64],
+        lambda: &[f64],
+        r: &mut [f64],
+        out: &mut impl FnMut(usize, f64),
+    ) {
+        let (d, m) = (self.dof, self.m);
+        r[..d].copy_from_slice(&q[..d]);
+        let lp = p.len().min(d);
+        r[d..d + lp].copy_from_slice(&p[..lp]);
+        let l = lambda.len().min(m);
+        r[2 * d..2 * d + l].copy_from_slice(&lambda[..l]);
+        let b = 2 * d + m;
+        r[b..b + self.statics.len()].copy_from_slice(&self.statics);
+        execute(&tape.ops, &mut r[..tape.regs]);
+        for &(i, s) in &tape.outs {
+            out(i as usize, r[s as usize]);
+        }
+    }
+
+    /// Runs `tape` and writes each output into `out[index]`.
+    #[inline]
+    pub fn eval_into(&self, tape: &Tape, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) {
+        self.eval(tape, q, p, lambda, |i, v| out[i] = v);
+    }
+}
+
+/// The interpreter loop.
+///
+/// Every register an instruction names is below `r.len()`: `Program::compile`
+/// checks it for each tape (`check_registers`) and `run` passes a register
+/// file of `tape.regs` entries, so the accesses skip bounds checks (with
+/// them the loop runs about twice as slow).
+#[inline]
+fn execute(ops: &[Op], r: &mut [f64]) {
+    let r = r.as_mut_ptr();
+    // SAFETY: see above; registers are plain f64 slots, read before the
+    // write of the same instruction.
+    unsafe {
+        let g = |i: u32| *r.add(i as usize);
+        let set = |i: u32, v: f64| *r.add(i as usize) = v;
+        for op in ops {
+            match *op {
+                Op::Add(d, a, b) => set(d, g(a) + g(b)),
+                Op::Mul(d, a, b) => set(d, g(a) * g(b)),
+                Op::Div(d, a, b) => set(d, g(a) / g(b)),
+                Op::Neg(d, a) => set(d, -g(a)),
+                Op::Powi(d, a, n) => set(d, g(a).powi(n)),
+                Op::Powf(d, a, b) => set(d, g(a).powf(g(b))),
+                Op::Sqrt(d, a) => set(d, g(a).sqrt()),
+                Op::Call(d, f, a) => set(d, f.apply(g(a))),
+            }
+        }
+    }
+}
+
+/// Panics unless every register of `tape` is below `tape.regs` (the
+/// invariant `execute` relies on; a compiler bug otherwise).
+fn check_registers(tape: &Tape) {
+    let n = tape.regs as u32;
+    let ok = tape.ops.iter().all(|op| match *op {
+        Op::Add(d, a, b) | Op::Mul(d, a, b) | Op::Div(d, a, b) | Op::Powf(d, a, b) => {
+            d < n && a < n && b < n
+        }
+        Op::Neg(d, a) | Op::Powi(d, a, _) | Op::Sqrt(d, a) | Op::Call(d, _, a) => d < n && a < n,
+    }) && tape.outs.iter().all(|o| o.1 < n);
+    assert!(ok, "tape names a register past its register file");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Program;
+
+    /// Every instruction kind against the formula written by hand: a
+    /// Hamiltonian with a quotient, a real power, sqrt, 1/sqrt, powi and the
+    /// elementary functions, and its gradient.
+    #[test]
+    fn tapes_compute_the_declared_functions() {
+        let src = "struct S {
+            parameters { k }
+            dof q[2], p[2];
+            hamiltonian = (p[0]^2 + p[1]^2) / (2 * k) + sin(q[0]) * exp(q[1]) - ln(q[0]) / sqrt(q[1])
+                + q[0]^5 + q[1]^1.5 + cos(p[0]) + tan(q[1]) - q[0]^(-3);
+            constraints { c: q[0]^2 + q[1]^2 - 1 }
+        }";
+        let decl = crate::declare(src).unwrap();
+        let (s, d) = decl.analysis.values();
+        let k = 1.7;
+        let prog = Program::compile(s, d, &[k]);
+        let (q, p) = ([0.6, 0.8], [0.3, -0.4]);
+        let h = |q: [f64; 2], p: [f64; 2]| {
+            (p[0] * p[0] + p[1] * p[1]) / (2.0 * k) + q[0].sin() * q[1].exp()
+                - q[0].ln() / q[1].sqrt()
+                + q[0].powi(5)
+                + q[1].powf(1.5)
+                + p[0].cos()
+                + q[1].tan()
+                - q[0].powi(-3)
+        };
+        let mut got = 0.0;
+        prog.eval(&prog.hamiltonian, &q, &p, &[], |_, v| got = v);
+        let want = h(q, p);
+        assert!(
+            (got - want).abs() <= 8.0 * f64::EPSILON * want.abs(),
+            "{got} {want}"
+        );
+        // ∂H/∂q_0 by hand.
+        let hq0 = q[0].cos() * q[1].exp() - 1.0 / (q[0] * q[1].sqrt())
+            + 5.0 * q[0].powi(4)
+            + 3.0 * q[0].powi(-4);
+        let mut g = [0.0; 2];
+        prog.eval_into(&prog.grad_q, &q, &p, &[], &mut g);
+        assert!(
+            (g[0] - hq0).abs() <= 16.0 * f64::EPSILON * hq0.abs(),
+            "{} {hq0}",
+            g[0]
+        );
+        // The constraint and its kick p ← p − λ g_q.
+        let mut c = [0.0];
+        prog.eval_into(&prog.constraints, &[0.6, 0.9], &p, &[], &mut c);
+        assert!((c[0] - (0.36 + 0.81 - 1.0)).abs() <= 4.0 * f64::EPSILON);
+        let mut pk = p;
+        prog.eval(prog.kick.as_ref().unwrap(), &q, &[], &[0.5], |i, v| {
+            pk[i] -= v
+        });
+        assert_eq!(pk, [p[0] - 0.5 * 2.0 * q[0], p[1] - 0.5 * 2.0 * q[1]]);
+    }
+}
