@@ -66,6 +66,42 @@ use quote::quote;
 /// # }
 /// ```
 ///
+/// With a default for every parameter the struct implements `Default`,
+/// and struct update syntax changes one parameter by name. Defaults for
+/// some parameters only are refused (at the first without one), as is a
+/// default that is not a number literal:
+///
+/// ```
+/// use shake::prelude::*;
+///
+/// constrained_system! {
+///     pub struct Pendulum {
+///         parameters { length = 1.0, gravity = 9.81 }
+///         dof q[2], p[2];
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+///         constraints { rod: q[0]^2 + q[1]^2 - length^2 }
+///     }
+/// }
+///
+/// # fn main() {
+/// assert_eq!(Pendulum::default(), Pendulum::new(1.0, 9.81));
+/// let long = Pendulum { length: 2.5, ..Pendulum::default() };
+/// assert_eq!((long.length, long.gravity), (2.5, 9.81));
+/// # }
+/// ```
+///
+/// ```compile_fail
+/// shake::constrained_system! {
+///     pub struct Pendulum {
+///         parameters { length = 1.0, gravity }
+///         dof q[2], p[2];
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+///         constraints { rod: q[0]^2 + q[1]^2 - length^2 }
+///     }
+/// }
+/// # fn main() {}
+/// ```
+///
 /// A chain of `N` links, anchored at the origin:
 ///
 /// ```
@@ -99,7 +135,8 @@ use quote::quote;
 ///
 /// ```text
 /// system     := doc* vis? "struct" Name "{" item* "}"
-/// item       := "parameters" "{" name,* "}"           -- pub f64 fields, in `new(..)` order
+/// item       := "parameters" "{" param,* "}"          -- pub f64 fields, in `new(..)` order
+/// param      := name | name "=" "-"? number           -- all with defaults: `impl Default`
 ///             | "const" NAME "=" expr ";"             -- compile-time number (integer for indices)
 ///             | "dof" q "[" index "]" "," p "[" index "]" ";"   -- z = (q, p) ∈ R^{2d}
 ///             | "coordinates" name,+ ";" "momenta" name,+ ";"  -- named scalars, paired in order
@@ -176,7 +213,7 @@ use quote::quote;
 ///
 /// ```text
 /// system     := doc* vis? "struct" Name "{" pitem* "}"
-/// pitem      := "parameters" "{" name,* "}"
+/// pitem      := "parameters" "{" param,* "}"
 ///             | "particles" x "[" DIM "]" ("," p "[" DIM "]")? ";"   -- DIM an integer literal
 ///             | "potential" "{" family,* "}"
 ///             | "constraints" "{" family,* "}"
