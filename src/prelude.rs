@@ -47,7 +47,7 @@
 
 pub use shake_macros::constrained_system;
 pub use shake_runtime::{
-    BaseMap, Composition, ConstrainedSystem, DiagnosticRecord, Hamiltonian, ImplicitMidpoint,
-    Integrator, Method, Options, RunOutcome, SolveError, State, StepError, Stop, StormerVerlet,
-    SymplecticEuler, Trajectory,
+    BaseMap, ClosedForm, Composition, ConstrainedSystem, DiagnosticRecord, Hamiltonian,
+    ImplicitMidpoint, Integrator, Method, Options, RunOutcome, SolveError, State, StepError, Stop,
+    StormerVerlet, SymplecticEuler, Trajectory,
 };

@@ -14,7 +14,7 @@
 //!   the step already made) against the general run.
 
 use shake::{
-    BaseMap, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, State, Stop,
+    BaseMap, ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, State, Stop,
     StormerVerlet, SymplecticEuler,
 };
 
@@ -151,9 +151,15 @@ fn the_classical_step_is_the_general_step() {
 struct NonSeparable<S>(S);
 
 impl<S: Hamiltonian> Hamiltonian for NonSeparable<S> {
-    const DOF: usize = S::DOF;
-    const SEPARABLE: bool = false;
-    const QUADRATIC_KINETIC: bool = false;
+    fn dof(&self) -> usize {
+        self.0.dof()
+    }
+    fn separable(&self) -> bool {
+        false
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        false
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         self.0.hamiltonian(q, p)
     }
@@ -169,10 +175,18 @@ impl<S: Hamiltonian> Hamiltonian for NonSeparable<S> {
 }
 
 impl<S: ConstrainedSystem> ConstrainedSystem for NonSeparable<S> {
-    const CONSTRAINTS: usize = S::CONSTRAINTS;
-    const KIND: ConstraintKind = S::KIND;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = S::JACOBIAN_PATTERN;
-    const CONSTRAINT_NAMES: &'static [&'static str] = S::CONSTRAINT_NAMES;
+    fn constraint_count(&self) -> usize {
+        self.0.constraint_count()
+    }
+    fn kind(&self) -> ConstraintKind {
+        self.0.kind()
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        self.0.jacobian_pattern()
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        self.0.constraint_name(i)
+    }
     fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
         self.0.constraints(q, p, g)
     }
@@ -191,7 +205,7 @@ impl<S: ConstrainedSystem> ConstrainedSystem for NonSeparable<S> {
     fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]) {
         self.0.nondegeneracy_matrix(q, p, n)
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         self.0.fibre_flow(lambda, q, p)
     }
 }

@@ -40,7 +40,7 @@ use shake::{
 };
 
 fn g_norm<S: ConstrainedSystem>(sys: &S, z: &State) -> f64 {
-    let mut g = vec![0.0; S::CONSTRAINTS];
+    let mut g = vec![0.0; sys.constraint_count()];
     sys.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
     g.iter().fold(0.0f64, |a, x| a.max(x.abs()))
 }

@@ -20,12 +20,13 @@ constrained_system! {
 fn pendulum_facts() {
     assert_eq!(Pendulum::DOF, 2);
     assert_eq!(Pendulum::CONSTRAINTS, 1);
-    assert_eq!(Pendulum::KIND, ConstraintKind::Holonomic);
-    assert_eq!((Pendulum::SEPARABLE,), (true,));
-    assert_eq!((Pendulum::QUADRATIC_KINETIC,), (true,));
-    assert_eq!(Pendulum::JACOBIAN_PATTERN, &[(0, 0), (0, 1)]);
-    assert_eq!(Pendulum::CONSTRAINT_NAMES, &["rod"]);
     let s = Pendulum::new(1.0, 9.81);
+    assert_eq!((s.dof(), s.constraint_count()), (2, 1));
+    assert_eq!(s.kind(), ConstraintKind::Holonomic);
+    assert_eq!((s.separable(),), (true,));
+    assert_eq!((s.quadratic_kinetic(),), (true,));
+    assert_eq!(s.jacobian_pattern(), &[(0, 0), (0, 1)]);
+    assert_eq!(s.constraint_name(0), "rod");
     let (q, p) = ([0.6, -0.8], [0.8, 0.6]);
     let mut g = [0.0];
     s.constraints(&q, &p, &mut g);

@@ -19,8 +19,8 @@
 
 use shake::models::{Chain8, Pendulum};
 use shake::{
-    BaseMap, ConstrainedSystem, ConstraintKind, Hamiltonian, ImplicitMidpoint, Integrator, State,
-    StormerVerlet,
+    BaseMap, ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, ImplicitMidpoint,
+    Integrator, State, StormerVerlet,
 };
 use std::cell::Cell;
 
@@ -84,9 +84,15 @@ struct Counting<'a, S> {
 }
 
 impl<S: ConstrainedSystem> Hamiltonian for Counting<'_, S> {
-    const DOF: usize = S::DOF;
-    const SEPARABLE: bool = S::SEPARABLE;
-    const QUADRATIC_KINETIC: bool = S::QUADRATIC_KINETIC;
+    fn dof(&self) -> usize {
+        self.sys.dof()
+    }
+    fn separable(&self) -> bool {
+        self.sys.separable()
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        self.sys.quadratic_kinetic()
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         bump(&self.counts.h);
         self.sys.hamiltonian(q, p)
@@ -110,10 +116,18 @@ impl<S: ConstrainedSystem> Hamiltonian for Counting<'_, S> {
 }
 
 impl<S: ConstrainedSystem> ConstrainedSystem for Counting<'_, S> {
-    const CONSTRAINTS: usize = S::CONSTRAINTS;
-    const KIND: ConstraintKind = S::KIND;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = S::JACOBIAN_PATTERN;
-    const CONSTRAINT_NAMES: &'static [&'static str] = S::CONSTRAINT_NAMES;
+    fn constraint_count(&self) -> usize {
+        self.sys.constraint_count()
+    }
+    fn kind(&self) -> ConstraintKind {
+        self.sys.kind()
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        self.sys.jacobian_pattern()
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        self.sys.constraint_name(i)
+    }
     fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
         bump(&self.counts.g);
         self.sys.constraints(q, p, g)
@@ -138,7 +152,7 @@ impl<S: ConstrainedSystem> ConstrainedSystem for Counting<'_, S> {
         bump(&self.counts.n);
         self.sys.nondegeneracy_matrix(q, p, n)
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         bump(&self.counts.fibre);
         self.sys.fibre_flow(lambda, q, p)
     }

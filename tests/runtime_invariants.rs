@@ -19,7 +19,7 @@ use shake::{
 };
 
 fn residuals<S: ConstrainedSystem>(sys: &S, z: &State) -> (f64, f64) {
-    let m = S::CONSTRAINTS;
+    let m = sys.constraint_count();
     let (mut g, mut gh) = (vec![0.0; m], vec![0.0; m]);
     sys.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
     sys.hidden_constraints(z.q.as_slice(), z.p.as_slice(), &mut gh);
@@ -134,7 +134,7 @@ fn check_all<S: ConstrainedSystem + Clone, B: BaseMap>(
     let mut flow = FibreFlow::new(&sys);
     let s1 = shake.step(&z0).unwrap();
     for mu in [-0.05, 0.02, 0.1] {
-        let lambda = vec![mu; S::CONSTRAINTS];
+        let lambda = vec![mu; sys.constraint_count()];
         let mut z = z0.clone();
         flow.apply(&sys, &lambda, z.q.as_mut_slice(), z.p.as_mut_slice())
             .unwrap();

@@ -15,7 +15,7 @@ use shake::{
 };
 
 fn residuals<S: ConstrainedSystem>(sys: &S, z: &State) -> (f64, f64) {
-    let m = S::CONSTRAINTS;
+    let m = sys.constraint_count();
     let (mut g, mut gh) = (vec![0.0; m], vec![0.0; m]);
     sys.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
     sys.hidden_constraints(z.q.as_slice(), z.p.as_slice(), &mut gh);

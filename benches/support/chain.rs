@@ -9,7 +9,7 @@
 //! `shake_runtime::system`), and the closed-form fibre flow.
 #![allow(dead_code, clippy::needless_range_loop)]
 
-use shake::{ConstrainedSystem, ConstraintKind, Hamiltonian, State};
+use shake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, State};
 
 /// The chain of N links, written by hand.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -52,10 +52,21 @@ const PATTERN: [(usize, usize); 4 * MAX_LINKS] = {
     out
 };
 
+impl<const N: usize> HandChain<N> {
+    /// The structurally nonzero entries of g_z, as a constant.
+    pub const JACOBIAN_PATTERN: &'static [(usize, usize)] = PATTERN.split_at(4 * N - 2).0;
+}
+
 impl<const N: usize> Hamiltonian for HandChain<N> {
-    const DOF: usize = 2 * N;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        2 * N
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         let mut e = 0.0;
         for k in 0..N {
@@ -81,10 +92,19 @@ impl<const N: usize> Hamiltonian for HandChain<N> {
 }
 
 impl<const N: usize> ConstrainedSystem for HandChain<N> {
-    const CONSTRAINTS: usize = N;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = PATTERN.split_at(4 * N - 2).0;
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["link"];
+    fn constraint_count(&self) -> usize {
+        N
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        Self::JACOBIAN_PATTERN
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["link"];
+        NAMES[i]
+    }
 
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         let l2 = self.length * self.length;
@@ -163,7 +183,7 @@ impl<const N: usize> ConstrainedSystem for HandChain<N> {
             prev = (dx, dy);
         }
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         // p ← p − g_qᵀλ: particle k feels links k (+) and k + 1 (−).
         for k in 0..N {
             let (dx, dy) = link(q, k);
@@ -175,7 +195,7 @@ impl<const N: usize> ConstrainedSystem for HandChain<N> {
                 p[2 * k - 1] += a * dy;
             }
         }
-        true
+        ClosedForm::Applied
     }
 }
 

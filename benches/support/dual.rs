@@ -125,9 +125,12 @@ fn seed(zh: &mut [HyperDual64], q: &[f64], p: &[f64], u: &[f64], v: &[f64]) {
 }
 
 impl<G: Generic> Hamiltonian for Ad<G> {
-    const DOF: usize = G::DOF;
-    const SEPARABLE: bool = G::SEPARABLE;
-    const QUADRATIC_KINETIC: bool = false;
+    fn dof(&self) -> usize {
+        G::DOF
+    }
+    fn separable(&self) -> bool {
+        G::SEPARABLE
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         self.sys.h(q, p)
     }
@@ -171,10 +174,19 @@ impl<G: Generic> Hamiltonian for Ad<G> {
 }
 
 impl<G: Generic> ConstrainedSystem for Ad<G> {
-    const CONSTRAINTS: usize = G::CONSTRAINTS;
-    const KIND: ConstraintKind = G::KIND;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = G::PATTERN;
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["g"];
+    fn constraint_count(&self) -> usize {
+        G::CONSTRAINTS
+    }
+    fn kind(&self) -> ConstraintKind {
+        G::KIND
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        G::PATTERN
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        let _ = i;
+        "g"
+    }
 
     fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
         self.sys.g(q, p, g);

@@ -6,7 +6,7 @@
 
 use super::dual::Generic;
 use num_dual::DualNum;
-use shake::{constrained_system, ConstrainedSystem, ConstraintKind};
+use shake::{constrained_system, ConstraintKind};
 
 // ---------------------------------------------------------------------------
 // Chains declared with the macro (the pattern of shake::models::Chain8).
@@ -56,8 +56,7 @@ impl Generic for PendulumG {
     const CONSTRAINTS: usize = 1;
     const KIND: ConstraintKind = ConstraintKind::Holonomic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] =
-        <shake::models::Pendulum as ConstrainedSystem>::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] = shake::models::Pendulum::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         (p[0] * p[0] + p[1] * p[1]) * c::<T>(0.5) + q[1] * c::<T>(self.gravity)
     }
@@ -78,8 +77,7 @@ impl Generic for SphericalG {
     const CONSTRAINTS: usize = 1;
     const KIND: ConstraintKind = ConstraintKind::Holonomic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] =
-        <shake::models::SphericalPendulum as ConstrainedSystem>::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] = shake::models::SphericalPendulum::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) * c::<T>(0.5) + q[2] * c::<T>(self.gravity)
     }
@@ -101,8 +99,7 @@ impl Generic for HopfG {
     const CONSTRAINTS: usize = 1;
     const KIND: ConstraintKind = ConstraintKind::Quadratic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] =
-        <shake::models::HopfGravity as ConstrainedSystem>::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] = shake::models::HopfGravity::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         (p[0] * p[0] + p[1] * p[1]) * c::<T>(0.5)
             - q[0] * c::<T>(self.gravity[0])
@@ -125,8 +122,7 @@ impl<const N: usize> Generic for ChainG<N> {
     const CONSTRAINTS: usize = N;
     const KIND: ConstraintKind = ConstraintKind::Holonomic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] =
-        <super::chain::HandChain<N> as ConstrainedSystem>::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] = super::chain::HandChain::<N>::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         let mut e = T::from(0.0);
         for k in 0..N {

@@ -244,8 +244,8 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
 
     let fibre = match der.kind {
         Kind::None => quote! {
-            fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
-                true
+            fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::shake::runtime::ClosedForm {
+                ::shake::runtime::ClosedForm::Applied
             }
         },
         // exp(Σλ_i X_{g_i}) for g = g(q): q fixed, p ← p − g_q(q)ᵀλ (Section 5.1).
@@ -270,10 +270,10 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
                 quote!(p[#k] -= #v;)
             });
             quote! {
-                fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+                fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::shake::runtime::ClosedForm {
                     #q_in #l_in #lets #p_arr
                     #(#kicks)*
-                    true
+                    ::shake::runtime::ClosedForm::Applied
                 }
             }
         }
@@ -281,12 +281,27 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     };
 
     quote! {
+        impl #name {
+            /// The number d of degrees of freedom (also `Hamiltonian::dof`),
+            /// as a constant for array lengths.
+            pub const DOF: usize = #d;
+            /// The number m of constraints (also
+            /// `ConstrainedSystem::constraint_count`), as a constant.
+            pub const CONSTRAINTS: usize = #m;
+            /// The structurally nonzero entries of g_z (also
+            /// `ConstrainedSystem::jacobian_pattern`), as a constant.
+            pub const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[#(#pattern),*];
+        }
+
         #[automatically_derived]
         #[allow(unused_variables, unused_mut, clippy::all, clippy::pedantic, clippy::nursery)]
         impl ::shake::runtime::Hamiltonian for #name {
-            const DOF: usize = #d;
-            const SEPARABLE: bool = #separable;
-            const QUADRATIC_KINETIC: bool = #quadratic_kinetic;
+            #[inline]
+            fn dof(&self) -> usize { #d }
+            #[inline]
+            fn separable(&self) -> bool { #separable }
+            #[inline]
+            fn quadratic_kinetic(&self) -> bool { #quadratic_kinetic }
 
             #[inline]
             fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
@@ -304,10 +319,17 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
         #[automatically_derived]
         #[allow(unused_variables, unused_mut, clippy::all, clippy::pedantic, clippy::nursery)]
         impl ::shake::runtime::ConstrainedSystem for #name {
-            const CONSTRAINTS: usize = #m;
-            const KIND: ::shake::runtime::ConstraintKind = ::shake::runtime::ConstraintKind::#kind;
-            const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[#(#pattern),*];
-            const CONSTRAINT_NAMES: &'static [&'static str] = &[#(#names),*];
+            #[inline]
+            fn constraint_count(&self) -> usize { #m }
+            #[inline]
+            fn kind(&self) -> ::shake::runtime::ConstraintKind { ::shake::runtime::ConstraintKind::#kind }
+            fn jacobian_pattern(&self) -> &[(usize, usize)] {
+                Self::JACOBIAN_PATTERN
+            }
+            fn constraint_name(&self, i: usize) -> &str {
+                const NAMES: &[&str] = &[#(#names),*];
+                NAMES[i]
+            }
 
             #[inline]
             fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) { #constraints }
@@ -328,11 +350,18 @@ pub fn fallback(def: &SystemDef) -> TokenStream {
     let s = struct_items(def, "");
     quote! {
         #s
+        impl #name {
+            /// Unreachable: the declaration has errors.
+            pub const DOF: usize = 0;
+            /// Unreachable: the declaration has errors.
+            pub const CONSTRAINTS: usize = 0;
+            /// Unreachable: the declaration has errors.
+            pub const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[];
+        }
         #[allow(unused_variables)]
         impl ::shake::runtime::Hamiltonian for #name {
-            const DOF: usize = 0;
-            const SEPARABLE: bool = false;
-            const QUADRATIC_KINETIC: bool = false;
+            fn dof(&self) -> usize { unreachable!() }
+            fn separable(&self) -> bool { unreachable!() }
             fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 { unreachable!() }
             fn grad_q(&self, q: &[f64], p: &[f64], h_q: &mut [f64]) { unreachable!() }
             fn grad_p(&self, q: &[f64], p: &[f64], h_p: &mut [f64]) { unreachable!() }
@@ -340,10 +369,10 @@ pub fn fallback(def: &SystemDef) -> TokenStream {
         }
         #[allow(unused_variables)]
         impl ::shake::runtime::ConstrainedSystem for #name {
-            const CONSTRAINTS: usize = 0;
-            const KIND: ::shake::runtime::ConstraintKind = ::shake::runtime::ConstraintKind::None;
-            const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[];
-            const CONSTRAINT_NAMES: &'static [&'static str] = &[];
+            fn constraint_count(&self) -> usize { unreachable!() }
+            fn kind(&self) -> ::shake::runtime::ConstraintKind { unreachable!() }
+            fn jacobian_pattern(&self) -> &[(usize, usize)] { unreachable!() }
+            fn constraint_name(&self, i: usize) -> &str { unreachable!() }
             fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) { unreachable!() }
             fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]) { unreachable!() }
             fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) { unreachable!() }

@@ -292,10 +292,11 @@ use quote::quote;
 /// # What is generated
 ///
 /// The struct (the user's doc and visibility, one `pub f64` field per
-/// parameter, `new`), and impls of `Hamiltonian` (H, H_q, H_p, H_zz,
-/// `SEPARABLE`, `QUADRATIC_KINETIC`) and `ConstrainedSystem` (g, g_z,
-/// Σλ_i∇²g_i, {g_i,H}, its Jacobian, N_ij = {{H,g_i},g_j}, `KIND`,
-/// `JACOBIAN_PATTERN`, `CONSTRAINT_NAMES`, and for holonomic constraints the
+/// parameter, `new`, the constants `DOF` and `CONSTRAINTS`), and impls of
+/// `Hamiltonian` (`dof`, `separable`, `quadratic_kinetic`, H, H_q, H_p,
+/// H_zz) and `ConstrainedSystem` (`constraint_count`, `kind`,
+/// `jacobian_pattern`, `constraint_name`, g, g_z, Σλ_i∇²g_i, {g_i,H}, its
+/// Jacobian, N_ij = {{H,g_i},g_j}, and for holonomic constraints the
 /// closed-form fibre flow p ← p − g_q(q)ᵀλ). Only structurally nonzero
 /// entries are computed and written.
 ///

@@ -12,7 +12,7 @@
 //!   p½ = p0 − (h/2) H_q(q0, p½),
 //!   q1 = q0 + (h/2)(H_p(q0, p½) + H_p(q1, p½)),
 //!   p1 = p½ − (h/2) H_q(q1, p½);
-//!   explicit when H is separable (`S::SEPARABLE`), implicit otherwise;
+//!   explicit when H is separable ([`Hamiltonian::separable`]), implicit otherwise;
 //!   symmetric, order 2.
 //! - [`SymplecticEuler`]: p1 = p0 − h H_q(q0, p1), q1 = q0 + h H_p(q0, p1)
 //!   (the paper's Section 5.1.3 variant); explicit when separable; order 1.
@@ -155,10 +155,11 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     ///
     /// ```
     /// use shake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, examples::Pendulum};
-    /// assert!(StormerVerlet::explicit_for::<Pendulum>());
-    /// assert!(!ImplicitMidpoint::explicit_for::<Pendulum>());
+    /// assert!(StormerVerlet.explicit_for(&Pendulum::default()));
+    /// assert!(!ImplicitMidpoint.explicit_for(&Pendulum::default()));
     /// ```
-    fn explicit_for<S: Hamiltonian>() -> bool {
+    fn explicit_for<S: Hamiltonian>(&self, sys: &S) -> bool {
+        let _ = sys;
         false
     }
 
@@ -617,8 +618,8 @@ impl BaseMap for StormerVerlet {
     const SYMMETRIC: bool = true;
     const ORDER: u32 = 2;
 
-    fn explicit_for<S: Hamiltonian>() -> bool {
-        S::SEPARABLE
+    fn explicit_for<S: Hamiltonian>(&self, sys: &S) -> bool {
+        sys.separable()
     }
 
     fn kick_drift_kick(&self) -> Option<(f64, f64)> {
@@ -637,7 +638,7 @@ impl BaseMap for StormerVerlet {
         let d = ws.d;
         let hh = 0.5 * h;
         let warm = ws.begin(q, p);
-        if S::SEPARABLE {
+        if sys.separable() {
             // Explicit: kick, drift, kick. The stage keeps p½ and q1.
             let BaseMapWorkspace {
                 stage, h_q, h_p, ..
@@ -754,7 +755,7 @@ impl BaseMap for StormerVerlet {
         let (p_half, q1) = ws.stage.split_at(d);
         sys.hessian(&ws.y[..d], p_half, &mut ws.hess_a);
         sys.hessian(q1, p_half, &mut ws.hess_b);
-        if !S::SEPARABLE {
+        if !sys.separable() {
             identity_plus_block(&mut ws.mat, &ws.hess_a, d, 0, d, hh);
             lu_factor(&mut ws.mat[..d * d], d, &mut ws.piv)
                 .map_err(|_| SolveError::Singular { iterations: 0 })?;
@@ -762,7 +763,7 @@ impl BaseMap for StormerVerlet {
             lu_factor(&mut ws.mat_b[..d * d], d, &mut ws.piv_b)
                 .map_err(|_| SolveError::Singular { iterations: 0 })?;
         }
-        ws.tangent_separable = S::SEPARABLE;
+        ws.tangent_separable = sys.separable();
         Ok(())
     }
 
@@ -807,7 +808,7 @@ impl BaseMap for StormerVerlet {
         ws: &mut BaseMapWorkspace,
         opts: &NewtonOptions,
     ) -> Result<usize, SolveError> {
-        if !S::SEPARABLE {
+        if !sys.separable() {
             dq.copy_from_slice(q);
             dp.copy_from_slice(p);
             let it = self.apply(sys, h, dq, dp, ws, opts)?;
@@ -855,8 +856,8 @@ impl BaseMap for SymplecticEuler {
     const SYMMETRIC: bool = false;
     const ORDER: u32 = 1;
 
-    fn explicit_for<S: Hamiltonian>() -> bool {
-        S::SEPARABLE
+    fn explicit_for<S: Hamiltonian>(&self, sys: &S) -> bool {
+        sys.separable()
     }
 
     fn kick_drift_kick(&self) -> Option<(f64, f64)> {
@@ -874,7 +875,7 @@ impl BaseMap for SymplecticEuler {
     ) -> Result<usize, SolveError> {
         let d = ws.d;
         let warm = ws.begin(q, p);
-        if S::SEPARABLE {
+        if sys.separable() {
             let BaseMapWorkspace {
                 stage, h_q, h_p, ..
             } = ws;
@@ -938,12 +939,12 @@ impl BaseMap for SymplecticEuler {
     ) -> Result<(), SolveError> {
         let d = ws.d;
         sys.hessian(&ws.y[..d], &ws.stage[..d], &mut ws.hess_a);
-        if !S::SEPARABLE {
+        if !sys.separable() {
             identity_plus_block(&mut ws.mat, &ws.hess_a, d, 0, d, h);
             lu_factor(&mut ws.mat[..d * d], d, &mut ws.piv)
                 .map_err(|_| SolveError::Singular { iterations: 0 })?;
         }
-        ws.tangent_separable = S::SEPARABLE;
+        ws.tangent_separable = sys.separable();
         Ok(())
     }
 

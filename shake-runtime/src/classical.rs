@@ -50,11 +50,11 @@ use crate::system::{ConstrainedSystem, ConstraintKind};
 
 /// The kick fractions (a, b) of the base map when the classical path
 /// applies to `S`, else `None`.
-pub(crate) fn classical<S: ConstrainedSystem, B: BaseMap>(base: &B) -> Option<(f64, f64)> {
-    if S::KIND == ConstraintKind::Holonomic
-        && S::SEPARABLE
-        && S::QUADRATIC_KINETIC
-        && S::CONSTRAINTS > 0
+pub(crate) fn classical<S: ConstrainedSystem, B: BaseMap>(sys: &S, base: &B) -> Option<(f64, f64)> {
+    if sys.kind() == ConstraintKind::Holonomic
+        && sys.separable()
+        && sys.quadratic_kinetic()
+        && sys.constraint_count() > 0
     {
         base.kick_drift_kick()
     } else {
@@ -74,7 +74,10 @@ fn residual<S: ConstrainedSystem>(sys: &S, h: f64, ws: &mut Workspace, first: bo
         // u ← u − G0ᵀλ: the fibre flow's kick, in the system's closed form
         // when it has one (straight-line code), else through the pattern.
         ws.y[..d].copy_from_slice(&ws.z0[..d]);
-        if !sys.fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.cl_u) {
+        if !sys
+            .fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.cl_u)
+            .applied()
+        {
             for &(i, k) in &ws.cl_pattern {
                 ws.cl_u[k] -= ws.g_z_y[i + k * m] * ws.lambda[i];
             }
@@ -332,7 +335,7 @@ pub(crate) fn project<S: ConstrainedSystem>(
     }
     // The kick, through the system's closed form when it has one.
     ws.cl_v[..q.len()].copy_from_slice(q);
-    if !sys.fibre_flow(&ws.sigma, &mut ws.cl_v, p) {
+    if !sys.fibre_flow(&ws.sigma, &mut ws.cl_v, p).applied() {
         sys.constraint_jacobian(q, p, &mut ws.g_z_1);
         for &(i, k) in &ws.cl_pattern {
             p[k] -= ws.g_z_1[i + k * m] * ws.sigma[i];

@@ -4,7 +4,7 @@
 //! `constrained_system!` does: straight-line code that writes only the
 //! structurally nonzero entries.
 
-use crate::system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
+use crate::system::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
 
 /// The harmonic oscillator H = (q² + p²)/2 on R², no constraints (wrap it in
 /// [`Unconstrained`](crate::Unconstrained) to integrate it).
@@ -17,9 +17,15 @@ use crate::system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 pub struct HarmonicOscillator;
 
 impl Hamiltonian for HarmonicOscillator {
-    const DOF: usize = 1;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        1
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * (q[0] * q[0] + p[0] * p[0])
     }
@@ -82,9 +88,15 @@ impl Pendulum {
 }
 
 impl Hamiltonian for Pendulum {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * (p[0] * p[0] + p[1] * p[1]) + self.gravity * q[1]
     }
@@ -102,10 +114,19 @@ impl Hamiltonian for Pendulum {
 }
 
 impl ConstrainedSystem for Pendulum {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 0), (0, 1)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["rod"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 0), (0, 1)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["rod"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         g[0] = q[0] * q[0] + q[1] * q[1] - self.length * self.length;
     }
@@ -129,10 +150,10 @@ impl ConstrainedSystem for Pendulum {
     fn nondegeneracy_matrix(&self, q: &[f64], _p: &[f64], n: &mut [f64]) {
         n[0] = 4.0 * (q[0] * q[0] + q[1] * q[1]);
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         p[0] -= 2.0 * lambda[0] * q[0];
         p[1] -= 2.0 * lambda[0] * q[1];
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -164,9 +185,15 @@ impl HopfHarmonic {
 }
 
 impl Hamiltonian for HopfHarmonic {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, _q: &[f64], p: &[f64]) -> f64 {
         0.5 * (p[0] * p[0] + p[1] * p[1])
     }
@@ -182,10 +209,19 @@ impl Hamiltonian for HopfHarmonic {
 }
 
 impl ConstrainedSystem for HopfHarmonic {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Quadratic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 0), (0, 1), (0, 2), (0, 3)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["sphere"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Quadratic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 0), (0, 1), (0, 2), (0, 3)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["sphere"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
         g[0] = q[0] * q[0] + q[1] * q[1] + p[0] * p[0] + p[1] * p[1] - self.radius2;
     }

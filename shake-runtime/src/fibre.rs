@@ -86,11 +86,11 @@ impl FibreFlow {
     /// let flow = FibreFlow::new(&Pendulum::default());
     /// ```
     pub fn new<S: ConstrainedSystem>(sys: &S) -> Self {
-        let d = S::DOF;
-        let m = S::CONSTRAINTS;
+        let d = sys.dof();
+        let m = sys.constraint_count();
         let n = 2 * d;
-        let quadratic = S::KIND == ConstraintKind::Quadratic;
-        let general = S::KIND == ConstraintKind::General;
+        let quadratic = sys.kind() == ConstraintKind::Quadratic;
+        let general = sys.kind() == ConstraintKind::General;
         let mut flow = FibreFlow {
             d,
             m,
@@ -152,22 +152,22 @@ impl FibreFlow {
         q: &mut [f64],
         p: &mut [f64],
     ) -> Result<(), SolveError> {
-        match S::KIND {
+        match sys.kind() {
             ConstraintKind::None => Ok(()),
             ConstraintKind::Holonomic => {
-                if !sys.fibre_flow(lambda, q, p) {
+                if !sys.fibre_flow(lambda, q, p).applied() {
                     self.kick(sys, lambda, q, p);
                 }
                 Ok(())
             }
             ConstraintKind::Quadratic => {
-                if !sys.fibre_flow(lambda, q, p) {
+                if !sys.fibre_flow(lambda, q, p).applied() {
                     self.linear_flow(lambda, q, p);
                 }
                 Ok(())
             }
             ConstraintKind::General => {
-                if sys.fibre_flow(lambda, q, p) {
+                if sys.fibre_flow(lambda, q, p).applied() {
                     Ok(())
                 } else {
                     self.integrate(sys, lambda, q, p)
@@ -204,7 +204,7 @@ impl FibreFlow {
         dp: &mut [f64],
     ) -> Result<(), SolveError> {
         let (d, m) = (self.d, self.m);
-        match S::KIND {
+        match sys.kind() {
             ConstraintKind::None => {
                 dq.fill(0.0);
                 dp.fill(0.0);
@@ -216,7 +216,7 @@ impl FibreFlow {
                 // the generated (sparse) code.
                 dq.copy_from_slice(q);
                 dp.fill(0.0);
-                let closed = sys.fibre_flow(lambda, dq, dp);
+                let closed = sys.fibre_flow(lambda, dq, dp).applied();
                 dq.fill(0.0);
                 if !closed {
                     sys.constraint_jacobian(q, p, &mut self.g_z);

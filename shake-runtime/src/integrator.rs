@@ -265,7 +265,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn new(system: S, base: B, h: f64) -> Self {
         let ws = Workspace::new(&system);
-        let classical = crate::classical::classical::<S, B>(&base);
+        let classical = crate::classical::classical(&system, &base);
+        let (d, m) = (system.dof(), system.constraint_count());
         Integrator {
             system,
             base,
@@ -274,23 +275,23 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             composition: Composition::SINGLE,
             compensated: true,
             carrying: false,
-            carry: vec![0.0; 2 * S::DOF],
+            carry: vec![0.0; 2 * d],
             options: Options::default(),
             diagnostics: false,
             ws,
             reference_norm: f64::NAN,
             det_prev: f64::NAN,
-            out_q: vec![0.0; S::DOF],
-            out_p: vec![0.0; S::DOF],
+            out_q: vec![0.0; d],
+            out_p: vec![0.0; d],
             classical,
             fast_paths: true,
             n_fresh: false,
-            checked: vec![0.0; 2 * S::DOF],
+            checked: vec![0.0; 2 * d],
             checked_valid: false,
             checked_norm: f64::NAN,
             checked_det: f64::NAN,
             last_norm: f64::NAN,
-            lead_lambda: vec![0.0; S::CONSTRAINTS],
+            lead_lambda: vec![0.0; m],
         }
     }
 
@@ -541,7 +542,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     }
 
     fn check_dims(&self, z: &State) -> Result<(), StepError> {
-        if z.q.len() != S::DOF || z.p.len() != S::DOF {
+        if z.q.len() != self.system.dof() || z.p.len() != self.system.dof() {
             return Err(StepError::InvalidInput {
                 what: "state dimension differs from the system's DOF",
                 value: z.q.len().max(z.p.len()) as f64,
@@ -564,7 +565,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         self.reference_norm = f64::NAN;
         self.det_prev = f64::NAN;
-        if S::CONSTRAINTS == 0 {
+        if self.system.constraint_count() == 0 {
             return Ok(());
         }
         self.system.constraints(q, p, &mut self.ws.g);
@@ -689,7 +690,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 t,
             });
         }
-        if S::CONSTRAINTS == 0 {
+        if self.system.constraint_count() == 0 {
             return Ok(info);
         }
         // Newton's stopping rule looks at the size of its updates, not at
@@ -845,10 +846,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn step_in_place(&mut self, z: &mut State) -> Result<StepInfo, StepError> {
         self.check_dims(z)?;
-        let d = S::DOF;
+        let d = self.system.dof();
         if self.fast_paths
             && self.checked_valid
-            && S::CONSTRAINTS > 0
+            && self.system.constraint_count() > 0
             && z.q.as_slice() == &self.checked[..d]
             && z.p.as_slice() == &self.checked[d..]
         {
@@ -969,7 +970,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
-        if S::CONSTRAINTS > 0 {
+        if self.system.constraint_count() > 0 {
             self.system.constraints(q, p, &mut self.ws.g);
             let r = norm_inf(&self.ws.g);
             if !(r <= self.options.constraint_tolerance) {
@@ -1035,7 +1036,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// fibre, same point: the parameters add); σ is taken off so that the
     /// record's λ is RATTLE's, from the state on M^H.
     fn fill_leaving_lambda(&mut self, traj: &mut Trajectory, per_step: bool) {
-        let m = S::CONSTRAINTS;
+        let m = self.system.constraint_count();
         let lead = if self.composition.stages() == 1 {
             &self.ws.lambda
         } else {
@@ -1098,7 +1099,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                     self.h,
                 )
                 .map_err(|e| e.at(k, t))?;
-            if self.options.check_component && S::CONSTRAINTS > 0 {
+            if self.options.check_component && self.system.constraint_count() > 0 {
                 let nd = check_nondegeneracy(
                     &self.system,
                     scratch.q.as_slice(),
@@ -1118,7 +1119,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         if self.diagnostics {
             let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());
             let (mut constraint, mut hidden) = (0.0, 0.0);
-            if S::CONSTRAINTS > 0 {
+            if self.system.constraint_count() > 0 {
                 self.system.constraints(sq, sp, &mut self.ws.g);
                 self.system.hidden_constraints(sq, sp, &mut self.ws.hidden);
                 constraint = norm_inf(&self.ws.g);
@@ -1316,16 +1317,16 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         // (a failing run may add its last good state: the buffer grows).
         let capacity = if store {
             // (reserved up to 256 MB; a longer run grows the buffer)
-            let budget = (1usize << 28) / (16 * S::DOF.max(1));
+            let budget = (1usize << 28) / (16 * integ.system.dof().max(1));
             usize::try_from(n / stride + 1 + u64::from(n % stride != 0))
                 .unwrap_or(usize::MAX)
                 .min(budget)
         } else {
             0
         };
-        traj = Trajectory::new(S::DOF, t0, h, stride, capacity);
+        traj = Trajectory::new(integ.system.dof(), t0, h, stride, capacity);
         if integ.diagnostics {
-            traj.set_constraints(S::CONSTRAINTS);
+            traj.set_constraints(integ.system.constraint_count());
             traj.reserve_multipliers(capacity);
         }
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();

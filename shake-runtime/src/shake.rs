@@ -145,8 +145,8 @@ pub(crate) struct Workspace {
 
 impl Workspace {
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S) -> Self {
-        let d = S::DOF;
-        let m = S::CONSTRAINTS;
+        let d = sys.dof();
+        let m = sys.constraint_count();
         let n = 2 * d;
         let jac_band = predicted_band(sys);
         let groups = if jac_band == Band::full(m) {
@@ -183,7 +183,8 @@ impl Workspace {
             jac_band,
             n_band: structural_band_of_n(sys),
             groups,
-            pattern: S::JACOBIAN_PATTERN
+            pattern: sys
+                .jacobian_pattern()
                 .iter()
                 .copied()
                 .filter(|&(i, k)| i < m && k < n)
@@ -197,12 +198,14 @@ impl Workspace {
             z1_probe: vec![0.0; n],
             jv: vec![0.0; m],
             lambda_scale: 0.0,
-            cl_pattern: S::JACOBIAN_PATTERN
+            cl_pattern: sys
+                .jacobian_pattern()
                 .iter()
                 .copied()
                 .filter(|&(i, k)| i < m && k < d)
                 .collect(),
-            cl_group: S::JACOBIAN_PATTERN
+            cl_group: sys
+                .jacobian_pattern()
                 .iter()
                 .filter(|&&(i, k)| i < m && k < d)
                 .map(|&(i, _)| i % groups)
@@ -232,7 +235,7 @@ const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
 /// an entry still holding a sentinel after one evaluation is zero at every
 /// point. Full when the band does not pay.
 fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
-    let (d, m) = (S::DOF, S::CONSTRAINTS);
+    let (d, m) = (sys.dof(), sys.constraint_count());
     let full = Band::full(m);
     if m < 12 {
         return full;
@@ -256,7 +259,7 @@ fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
 }
 
 fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
-    let (d, m) = (S::DOF, S::CONSTRAINTS);
+    let (d, m) = (sys.dof(), sys.constraint_count());
     let n = 2 * d;
     let full = Band::full(m);
     if !full.pays(m) && m < 12 {
@@ -264,7 +267,7 @@ fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
     }
     let mut vars_of = vec![Vec::new(); m];
     let mut rows_of = vec![Vec::new(); n];
-    for &(i, k) in S::JACOBIAN_PATTERN {
+    for &(i, k) in sys.jacobian_pattern() {
         if i < m && k < n {
             vars_of[i].push(k);
             rows_of[k].push(i);
@@ -372,7 +375,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     report.base_iterations += residual(sys, base, h, ws, opts, false)?;
     // An explicit base map makes the residual cheap: difference quotients
     // of it beat the tangent map.
-    let explicit = B::explicit_for::<S>();
+    let explicit = base.explicit_for(sys);
     let mut need_jacobian = true;
     let mut refreshes = 0;
     let mut prev_step = f64::INFINITY;

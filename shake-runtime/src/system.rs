@@ -58,18 +58,46 @@ impl ConstraintKind {
     }
 }
 
+/// What [`ConstrainedSystem::fibre_flow`] did.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+#[must_use]
+pub enum ClosedForm {
+    /// exp(Σ λ_i X_{g_i}) was applied to (q, p) in closed form.
+    Applied,
+    /// The system has no closed form; q and p are untouched and the caller
+    /// integrates the fibre flow itself.
+    Unavailable,
+}
+
+impl ClosedForm {
+    /// True when the flow was applied.
+    pub const fn applied(self) -> bool {
+        matches!(self, ClosedForm::Applied)
+    }
+}
+
 /// A Hamiltonian H(q, p) on R^{2d} and its derivatives.
 ///
 /// This is all a base map φ_h needs.
 pub trait Hamiltonian {
     /// The number d of degrees of freedom: q and p are in R^d.
-    const DOF: usize;
+    ///
+    /// A method, not a constant, so that a system whose size is only known
+    /// at run time (declared from a string, read from a file) implements the
+    /// trait too; the runtime reads it once when it builds its workspaces.
+    fn dof(&self) -> usize;
+
     /// H = T(p) + V(q): H_qp ≡ 0, H_q depends on q only and H_p on p only,
     /// which makes Störmer–Verlet and symplectic Euler explicit.
-    const SEPARABLE: bool;
+    fn separable(&self) -> bool;
+
     /// H = ½ pᵀ A p + V(q) with a constant matrix A (T quadratic in p, with
-    /// coefficients independent of q): H_pp is constant.
-    const QUADRATIC_KINETIC: bool;
+    /// coefficients independent of q): H_pp is constant, so `grad_p` is the
+    /// linear map v ↦ A v. The classical SHAKE path (`classical`) relies on
+    /// it; `false` (the default) is always safe and selects the general path.
+    fn quadratic_kinetic(&self) -> bool {
+        false
+    }
 
     /// H(q, p).
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64;
@@ -92,7 +120,7 @@ pub trait Hamiltonian {
     fn hessian(&self, q: &[f64], p: &[f64], h_zz: &mut [f64]);
 }
 
-/// A Hamiltonian with constraints g_1, ..., g_m (m = [`Self::CONSTRAINTS`]).
+/// A Hamiltonian with constraints g_1, ..., g_m (m = [`Self::constraint_count`]).
 ///
 /// Everything SHAKE and RATTLE need: the constraints and their Jacobian, the
 /// hidden constraints {g_i, H} and their Jacobian, the nondegeneracy matrix
@@ -100,21 +128,25 @@ pub trait Hamiltonian {
 /// exists in closed form) the fibre flow.
 pub trait ConstrainedSystem: Hamiltonian {
     /// The number m of constraints.
-    const CONSTRAINTS: usize;
+    fn constraint_count(&self) -> usize;
+
     /// How g depends on z; picks the fibre flow.
-    const KIND: ConstraintKind;
+    fn kind(&self) -> ConstraintKind;
+
     /// The structurally nonzero entries (i, k) of g_z (m × 2d), k < d for
     /// ∂g_i/∂q_k and k ≥ d for ∂g_i/∂p_{k−d}, sorted by i then k. Banded
     /// patterns (chains) let the runtime pick a structured solve.
-    const JACOBIAN_PATTERN: &'static [(usize, usize)];
-    /// A name for each constraint, for error messages and diagnostics.
-    const CONSTRAINT_NAMES: &'static [&'static str];
+    fn jacobian_pattern(&self) -> &[(usize, usize)];
+
+    /// The declared name of constraint i (0 ≤ i < m), for error messages
+    /// and diagnostics: an error caused by one constraint names it.
+    fn constraint_name(&self, i: usize) -> &str;
 
     /// g(q, p), written into `g` (length m).
     fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]);
 
     /// g_z = [g_q  g_p] (m × 2d, column-major); only entries of
-    /// [`Self::JACOBIAN_PATTERN`] are written.
+    /// [`Self::jacobian_pattern`] are written.
     fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]);
 
     /// Σ_i λ_i ∇²g_i (2d × 2d, column-major): the derivative of the fibre
@@ -136,10 +168,11 @@ pub trait ConstrainedSystem: Hamiltonian {
     fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]);
 
     /// The fibre flow z ↦ exp(Σ λ_i X_{g_i})(z) in closed form, applied in
-    /// place. Returns `false`, leaving q and p untouched, when the system has
-    /// no closed form; the runtime then uses its own (see `fibre`).
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    /// place. Returns [`ClosedForm::Unavailable`], leaving q and p
+    /// untouched, when the system has none; the runtime then uses its own
+    /// (see `fibre`).
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         let _ = (lambda, q, p);
-        false
+        ClosedForm::Unavailable
     }
 }

@@ -18,9 +18,15 @@ use crate::system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 pub struct Unconstrained<H>(pub H);
 
 impl<H: Hamiltonian> Hamiltonian for Unconstrained<H> {
-    const DOF: usize = H::DOF;
-    const SEPARABLE: bool = H::SEPARABLE;
-    const QUADRATIC_KINETIC: bool = H::QUADRATIC_KINETIC;
+    fn dof(&self) -> usize {
+        self.0.dof()
+    }
+    fn separable(&self) -> bool {
+        self.0.separable()
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        self.0.quadratic_kinetic()
+    }
 
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         self.0.hamiltonian(q, p)
@@ -40,10 +46,18 @@ impl<H: Hamiltonian> Hamiltonian for Unconstrained<H> {
 }
 
 impl<H: Hamiltonian> ConstrainedSystem for Unconstrained<H> {
-    const CONSTRAINTS: usize = 0;
-    const KIND: ConstraintKind = ConstraintKind::None;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &[];
+    fn constraint_count(&self) -> usize {
+        0
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::None
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        panic!("an unconstrained system has no constraint {i}")
+    }
 
     fn constraints(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
     fn constraint_jacobian(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}

@@ -12,7 +12,7 @@
 //! hidden constraints {g_i, H}, N_ij = {{H,g_i},g_j}.
 #![allow(dead_code)]
 
-use shake::{ConstrainedSystem, ConstraintKind, Hamiltonian};
+use shake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
 
 // ---------------------------------------------------------------------------
 // Pendulum (Example 1.3)
@@ -57,9 +57,15 @@ impl NonSeparablePendulum {
 }
 
 impl Hamiltonian for NonSeparablePendulum {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = false;
-    const QUADRATIC_KINETIC: bool = false;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        false
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        false
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * (1.0 + self.eps * q[0] * q[0]) * (p[0] * p[0] + p[1] * p[1]) + self.gravity * q[1]
     }
@@ -87,10 +93,19 @@ impl Hamiltonian for NonSeparablePendulum {
 }
 
 impl ConstrainedSystem for NonSeparablePendulum {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 0), (0, 1)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["rod"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 0), (0, 1)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["rod"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         g[0] = q[0] * q[0] + q[1] * q[1] - 1.0;
     }
@@ -118,11 +133,11 @@ impl ConstrainedSystem for NonSeparablePendulum {
         let a = 1.0 + self.eps * q[0] * q[0];
         n[0] = 4.0 * a * (q[0] * q[0] + q[1] * q[1]);
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         let l2 = 2.0 * lambda[0];
         p[0] -= l2 * q[0];
         p[1] -= l2 * q[1];
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -163,9 +178,15 @@ impl SphericalPendulum {
 }
 
 impl Hamiltonian for SphericalPendulum {
-    const DOF: usize = 3;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        3
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) + self.gravity * q[2]
     }
@@ -185,10 +206,19 @@ impl Hamiltonian for SphericalPendulum {
 }
 
 impl ConstrainedSystem for SphericalPendulum {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 0), (0, 1), (0, 2)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["rod"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 0), (0, 1), (0, 2)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["rod"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         g[0] = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - self.length * self.length;
     }
@@ -216,12 +246,12 @@ impl ConstrainedSystem for SphericalPendulum {
     fn nondegeneracy_matrix(&self, q: &[f64], _p: &[f64], n: &mut [f64]) {
         n[0] = 4.0 * (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         let l2 = 2.0 * lambda[0];
         p[0] -= l2 * q[0];
         p[1] -= l2 * q[1];
         p[2] -= l2 * q[2];
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -269,9 +299,15 @@ impl DoublePendulum {
 }
 
 impl Hamiltonian for DoublePendulum {
-    const DOF: usize = 4;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        4
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         (p[0] * p[0] + p[1] * p[1]) * (0.5 / self.m1)
             + (p[2] * p[2] + p[3] * p[3]) * (0.5 / self.m2)
@@ -296,11 +332,19 @@ impl Hamiltonian for DoublePendulum {
 }
 
 impl ConstrainedSystem for DoublePendulum {
-    const CONSTRAINTS: usize = 2;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] =
-        &[(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (1, 3)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["upper rod", "lower rod"];
+    fn constraint_count(&self) -> usize {
+        2
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (1, 3)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["upper rod", "lower rod"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         let (ux, uy) = (q[2] - q[0], q[3] - q[1]);
         g[0] = q[0] * q[0] + q[1] * q[1] - self.l1 * self.l1;
@@ -367,14 +411,14 @@ impl ConstrainedSystem for DoublePendulum {
         n[2] = -4.0 * qu / self.m1;
         n[3] = 4.0 * uu * (1.0 / self.m1 + 1.0 / self.m2);
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         let (ux, uy) = (q[2] - q[0], q[3] - q[1]);
         let (a, b) = (2.0 * lambda[0], 2.0 * lambda[1]);
         p[0] -= a * q[0] - b * ux;
         p[1] -= a * q[1] - b * uy;
         p[2] -= b * ux;
         p[3] -= b * uy;
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -412,9 +456,15 @@ impl Hopf {
 }
 
 impl Hamiltonian for Hopf {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * (p[0] * p[0] + p[1] * p[1]) - self.gravity[0] * q[0] - self.gravity[1] * q[1]
     }
@@ -433,10 +483,19 @@ impl Hamiltonian for Hopf {
 }
 
 impl ConstrainedSystem for Hopf {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Quadratic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 0), (0, 1), (0, 2), (0, 3)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["sphere"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Quadratic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 0), (0, 1), (0, 2), (0, 3)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["sphere"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
         g[0] = q[0] * q[0] + q[1] * q[1] + p[0] * p[0] + p[1] * p[1] - self.radius2;
     }
@@ -471,14 +530,14 @@ impl ConstrainedSystem for Hopf {
                 + self.gravity[0] * q[0]
                 + self.gravity[1] * q[1]);
     }
-    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         let (s, c) = (2.0 * lambda[0]).sin_cos();
         for k in 0..2 {
             let (qk, pk) = (q[k], p[k]);
             q[k] = c * qk + s * pk;
             p[k] = -s * qk + c * pk;
         }
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -492,9 +551,15 @@ impl ConstrainedSystem for Hopf {
 pub struct IndexFive;
 
 impl Hamiltonian for IndexFive {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = false;
-    const QUADRATIC_KINETIC: bool = false;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        false
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        false
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * p[0] * p[0] + p[1] * q[0]
     }
@@ -513,10 +578,19 @@ impl Hamiltonian for IndexFive {
 }
 
 impl ConstrainedSystem for IndexFive {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 1)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["q̄"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 1)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["q̄"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         g[0] = q[1];
     }
@@ -533,9 +607,9 @@ impl ConstrainedSystem for IndexFive {
     fn nondegeneracy_matrix(&self, _q: &[f64], _p: &[f64], n: &mut [f64]) {
         n[0] = 0.0;
     }
-    fn fibre_flow(&self, lambda: &[f64], _q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], _q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         p[1] -= lambda[0];
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -545,9 +619,15 @@ impl ConstrainedSystem for IndexFive {
 pub struct FlatFibres;
 
 impl Hamiltonian for FlatFibres {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = true;
-    const QUADRATIC_KINETIC: bool = true;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        true
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        true
+    }
     fn hamiltonian(&self, _q: &[f64], p: &[f64]) -> f64 {
         0.5 * p[0] * p[0]
     }
@@ -561,10 +641,19 @@ impl Hamiltonian for FlatFibres {
 }
 
 impl ConstrainedSystem for FlatFibres {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 1)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["q̄"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 1)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["q̄"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         g[0] = q[1];
     }
@@ -579,9 +668,9 @@ impl ConstrainedSystem for FlatFibres {
     fn nondegeneracy_matrix(&self, _q: &[f64], _p: &[f64], n: &mut [f64]) {
         n[0] = 0.0;
     }
-    fn fibre_flow(&self, lambda: &[f64], _q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], _q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         p[1] -= lambda[0];
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -592,9 +681,15 @@ impl ConstrainedSystem for FlatFibres {
 pub struct SignChange;
 
 impl Hamiltonian for SignChange {
-    const DOF: usize = 2;
-    const SEPARABLE: bool = false;
-    const QUADRATIC_KINETIC: bool = false;
+    fn dof(&self) -> usize {
+        2
+    }
+    fn separable(&self) -> bool {
+        false
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        false
+    }
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         0.5 * p[0] * p[0] + 0.5 * q[0] * p[1] * p[1]
     }
@@ -614,10 +709,19 @@ impl Hamiltonian for SignChange {
 }
 
 impl ConstrainedSystem for SignChange {
-    const CONSTRAINTS: usize = 1;
-    const KIND: ConstraintKind = ConstraintKind::Holonomic;
-    const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[(0, 1)];
-    const CONSTRAINT_NAMES: &'static [&'static str] = &["q̄"];
+    fn constraint_count(&self) -> usize {
+        1
+    }
+    fn kind(&self) -> ConstraintKind {
+        ConstraintKind::Holonomic
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        &[(0, 1)]
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        const NAMES: &[&str] = &["q̄"];
+        NAMES[i]
+    }
     fn constraints(&self, q: &[f64], _p: &[f64], g: &mut [f64]) {
         g[0] = q[1];
     }
@@ -635,9 +739,9 @@ impl ConstrainedSystem for SignChange {
     fn nondegeneracy_matrix(&self, q: &[f64], _p: &[f64], n: &mut [f64]) {
         n[0] = q[0];
     }
-    fn fibre_flow(&self, lambda: &[f64], _q: &mut [f64], p: &mut [f64]) -> bool {
+    fn fibre_flow(&self, lambda: &[f64], _q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         p[1] -= lambda[0];
-        true
+        ClosedForm::Applied
     }
 }
 
@@ -659,9 +763,15 @@ pub struct AsGeneral<S>(pub S);
 macro_rules! delegate {
     ($wrapper:ident, $kind:expr) => {
         impl<S: ConstrainedSystem> Hamiltonian for $wrapper<S> {
-            const DOF: usize = S::DOF;
-            const SEPARABLE: bool = S::SEPARABLE;
-            const QUADRATIC_KINETIC: bool = S::QUADRATIC_KINETIC;
+            fn dof(&self) -> usize {
+                self.0.dof()
+            }
+            fn separable(&self) -> bool {
+                self.0.separable()
+            }
+            fn quadratic_kinetic(&self) -> bool {
+                self.0.quadratic_kinetic()
+            }
             fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
                 self.0.hamiltonian(q, p)
             }
@@ -676,10 +786,19 @@ macro_rules! delegate {
             }
         }
         impl<S: ConstrainedSystem> ConstrainedSystem for $wrapper<S> {
-            const CONSTRAINTS: usize = S::CONSTRAINTS;
-            const KIND: ConstraintKind = $kind;
-            const JACOBIAN_PATTERN: &'static [(usize, usize)] = S::JACOBIAN_PATTERN;
-            const CONSTRAINT_NAMES: &'static [&'static str] = S::CONSTRAINT_NAMES;
+            fn constraint_count(&self) -> usize {
+                self.0.constraint_count()
+            }
+            fn kind(&self) -> ConstraintKind {
+                let kind: Option<ConstraintKind> = $kind;
+                kind.unwrap_or_else(|| self.0.kind())
+            }
+            fn jacobian_pattern(&self) -> &[(usize, usize)] {
+                self.0.jacobian_pattern()
+            }
+            fn constraint_name(&self, i: usize) -> &str {
+                self.0.constraint_name(i)
+            }
             fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
                 self.0.constraints(q, p, g)
             }
@@ -702,5 +821,5 @@ macro_rules! delegate {
     };
 }
 
-delegate!(NoClosedForm, S::KIND);
-delegate!(AsGeneral, ConstraintKind::General);
+delegate!(NoClosedForm, None);
+delegate!(AsGeneral, Some(ConstraintKind::General));

@@ -16,6 +16,7 @@ constrained_system! {
 
 fn main() {
     assert_eq!((Chain64::DOF, Chain64::CONSTRAINTS), (128, 64));
-    assert_eq!(Chain64::JACOBIAN_PATTERN.len(), 2 + 4 * 63);
-    let _ = Chain64::new(1.0, 0.1, 9.81);
+    let c = Chain64::new(1.0, 0.1, 9.81);
+    assert_eq!((c.dof(), c.constraint_count()), (128, 64));
+    assert_eq!(c.jacobian_pattern().len(), 2 + 4 * 63);
 }

@@ -49,6 +49,6 @@ fn main() {
         HopfGravity::new(0.0, -1.0, 0.98),
         IndexOne::new(),
     );
-    assert_eq!(HopfGravity::KIND, ConstraintKind::Quadratic);
-    assert_eq!(IndexOne::KIND, ConstraintKind::Holonomic);
+    assert_eq!(HopfGravity::new(0.0, -1.0, 0.98).kind(), ConstraintKind::Quadratic);
+    assert_eq!(IndexOne::new().kind(), ConstraintKind::Holonomic);
 }

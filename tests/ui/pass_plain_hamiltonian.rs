@@ -12,8 +12,9 @@ constrained_system! {
 }
 
 fn main() {
-    assert_eq!(Kepler::KIND, ConstraintKind::None);
     let k = Kepler::new();
+    assert_eq!(k.kind(), ConstraintKind::None);
+    assert_eq!((Kepler::DOF, Kepler::CONSTRAINTS), (2, 0));
     let h = k.hamiltonian(&[1.0, 0.0], &[0.0, 1.0]);
     assert!((h + 0.5).abs() < 1e-15);
 }

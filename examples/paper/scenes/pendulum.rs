@@ -519,7 +519,9 @@ fn fibre_independence(claims: &mut Claims) -> PlotResult<()> {
         for lambda in [-0.3, -0.1, 0.05, 0.2, 0.4] {
             let (mut q, mut p) = (z0.q.clone(), z0.p.clone());
             // Move along the fibre: the closed-form flow exp(λ X_g).
-            assert!(sys.fibre_flow(&[lambda], q.as_mut_slice(), p.as_mut_slice()));
+            assert!(sys
+                .fibre_flow(&[lambda], q.as_mut_slice(), p.as_mut_slice())
+                .applied());
             let s = integ.step(&State::new(q, p))?;
             worst = worst.max(s.distance(&s0));
         }
@@ -558,7 +560,11 @@ fn one_step_figure(ctx: &Ctx) -> PlotResult<()> {
     let z1m = shake.step(&z0)?;
     let lambda = shake.last_multipliers()[0];
     let (mut qp, mut pp) = (z0.q.clone(), z0.p.clone());
-    sys.fibre_flow(&[lambda], qp.as_mut_slice(), pp.as_mut_slice());
+    let closed = sys.fibre_flow(&[lambda], qp.as_mut_slice(), pp.as_mut_slice());
+    assert!(
+        closed.applied(),
+        "the pendulum's fibre flow has a closed form"
+    );
     let mut rattle = Integrator::new(sys, StormerVerlet, h).rattle();
     let z1 = rattle.project(&z1m)?;
     // Velocity arrows drawn at this scale (position units per momentum unit).
