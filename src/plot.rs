@@ -203,7 +203,7 @@ pub fn energy_error<S: Hamiltonian>(
     system: &S,
     path: impl AsRef<Path>,
 ) -> Result<(), PlotError> {
-    check(traj, S::DOF)?;
+    check(traj, system.dof())?;
     let e0 = system.hamiltonian(traj.q(0), traj.p(0));
     finite(traj, 0, "H", e0)?;
     let scale = if e0 == 0.0 { 1.0 } else { e0.abs() };
@@ -254,8 +254,8 @@ pub fn constraint_residual<S: ConstrainedSystem>(
     system: &S,
     path: impl AsRef<Path>,
 ) -> Result<(), PlotError> {
-    check(traj, S::DOF)?;
-    let m = S::CONSTRAINTS;
+    check(traj, system.dof())?;
+    let m = system.constraint_count();
     let mut g = vec![0.0; m];
     let (mut primary, mut hidden) = (Vec::new(), Vec::new());
     for i in 0..traj.len() {
