@@ -67,6 +67,7 @@ pub mod integrator;
 pub mod io;
 #[cfg(feature = "arrow")]
 pub mod io_arrow;
+mod keep_positions;
 mod linalg;
 pub mod newton;
 pub mod particles;
