@@ -44,6 +44,8 @@
 //! - [`diagnostics`] and [`error`]: what a run measures, and how it fails.
 //! - [`io`]: a trajectory as CSV and back; with the `arrow` feature,
 //!   `io_arrow`: as an Arrow IPC (Feather v2) file and back.
+//! - with the `progress` feature, `progress`: an indicatif bar on a run's
+//!   per-step hook.
 #![warn(missing_docs)]
 // Numerical kernels index several arrays with one loop variable, as the
 // formulas do; iterator chains would hide them.
@@ -72,6 +74,8 @@ mod keep_positions;
 mod linalg;
 pub mod newton;
 pub mod particles;
+#[cfg(feature = "progress")]
+pub mod progress;
 pub mod rattle;
 pub mod run;
 mod shake;
