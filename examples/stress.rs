@@ -4,6 +4,7 @@
 //!
 //!     cargo run --release --example stress            # full sizes (a few minutes)
 //!     cargo run --release --example stress -- --quick # 100× fewer steps
+//!     cargo run --release --example stress --features progress  # with progress bars
 //!
 //! Writes PNG, SVG and CSV into `stress-output/` and prints a summary.
 //!
@@ -261,7 +262,10 @@ fn energy_run<S: ConstrainedSystem + Clone, B: BaseMap>(
     every: u64,
 ) -> Res<(Vec<(f64, f64)>, f64)> {
     let e0 = sys.hamiltonian(z0.q.as_slice(), z0.p.as_slice());
-    let bar = bar(steps, name);
+    // The library's bar on the per-step hook (`--features progress`);
+    // without the feature the run is silent until it ends.
+    #[cfg(feature = "progress")]
+    let mut progress = shake::progress::Progress::new(name);
     let mut pts = Vec::with_capacity((steps / every) as usize + 1);
     // The energy is looked at every `every/100` steps; each plotted point is
     // the largest |ΔH| over a window of `every` steps (the envelope: single
@@ -269,8 +273,8 @@ fn energy_run<S: ConstrainedSystem + Clone, B: BaseMap>(
     let look = (every / 100).max(1);
     let mut window = 0.0f64;
     let start = std::time::Instant::now();
-    let out = Integrator::new(sys.clone(), base, h)
-        .compensated(compensated)
+    let mut integ = Integrator::new(sys.clone(), base, h).compensated(compensated);
+    let run = integ
         .run(z0.clone(), Stop::Steps(steps))
         .stride(look)
         .store(false)
@@ -281,13 +285,15 @@ fn energy_run<S: ConstrainedSystem + Clone, B: BaseMap>(
                 if k % every == 0 {
                     pts.push((t, window));
                     window = 0.0;
-                    bar.set_position(k);
                 }
             }
-        })
-        .execute();
+        });
+    #[cfg(feature = "progress")]
+    let run = run.on_step(progress.hook());
+    let out = run.execute();
     let secs = start.elapsed().as_secs_f64();
-    bar.finish_and_clear();
+    #[cfg(feature = "progress")]
+    progress.bar().finish_and_clear();
     if let Some(e) = out.error {
         return Err(format!("{name}: {e}").into());
     }

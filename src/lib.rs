@@ -50,6 +50,8 @@ extern crate self as shake;
 
 pub mod declared;
 pub mod models;
+#[cfg(feature = "plot")]
+pub mod plot;
 pub mod prelude;
 
 pub use shake_macros::constrained_system;

@@ -37,9 +37,8 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
             }
         })
         .collect();
-    let field_docs = params
-        .iter()
-        .map(|p| format!(" The parameter `{p}` (a constant for differentiation)."));
+    let field_docs = field_docs(params, def.defaults.as_deref());
+    let default = default_impl(name, def.defaults.as_deref());
     quote! {
         #(#attrs)*
         #[doc = #extra_doc]
@@ -55,6 +54,47 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
             #[must_use]
             pub const fn new(#(#args: f64),*) -> Self {
                 Self { #(#params: #args),* }
+            }
+        }
+
+        #default
+    }
+}
+
+/// One doc line per parameter field, with its default when declared.
+pub fn field_docs(params: &[syn::Ident], defaults: Option<&[f64]>) -> Vec<String> {
+    params
+        .iter()
+        .enumerate()
+        .map(|(k, p)| match defaults {
+            Some(d) => format!(
+                " The parameter `{p}` (a constant for differentiation; default {:?}).",
+                d[k]
+            ),
+            None => format!(" The parameter `{p}` (a constant for differentiation)."),
+        })
+        .collect()
+}
+
+/// `impl Default` from the declared defaults (all parameters have one),
+/// through `new` so that the order is the declaration's.
+pub fn default_impl(name: &syn::Ident, defaults: Option<&[f64]>) -> TokenStream {
+    let Some(d) = defaults else {
+        return TokenStream::new();
+    };
+    let values = d.iter().map(|&v| {
+        let lit = Literal::f64_suffixed(v.abs());
+        if v.is_sign_negative() {
+            quote!(-#lit)
+        } else {
+            quote!(#lit)
+        }
+    });
+    quote! {
+        /// The parameters' declared defaults.
+        impl ::core::default::Default for #name {
+            fn default() -> Self {
+                Self::new(#(#values),*)
             }
         }
     }

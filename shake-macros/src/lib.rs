@@ -31,9 +31,8 @@ use quote::quote;
 /// `shake::runtime::ConstrainedSystem` (H, g and every derivative SHAKE and
 /// RATTLE need, differentiated symbolically at compile time).
 ///
-/// ```ignore
-/// // (Compiled as an integration test of the `shake` facade: tests/macro_*.rs.)
-/// use shake::constrained_system;
+/// ```
+/// use shake::prelude::*;
 ///
 /// constrained_system! {
 ///     /// Planar pendulum (the paper's Example 1.3).
@@ -47,13 +46,67 @@ use quote::quote;
 ///         }
 ///     }
 /// }
-/// let pendulum = Pendulum::new(1.0, 9.81);
+///
+/// # fn main() -> Result<(), StepError> {
+/// // `new` takes the parameters in declaration order; the fields are
+/// // `pub f64` named after them, so a struct literal names each one (no
+/// // silent swap when there are many).
+/// let pendulum = Pendulum { length: 1.0, gravity: 9.81 };
+/// assert_eq!(pendulum, Pendulum::new(1.0, 9.81));
+/// assert_eq!((Pendulum::DOF, Pendulum::CONSTRAINTS), (2, 1));
+/// assert_eq!(pendulum.constraint_name(0), "rod");
+///
+/// let mut rattle = Integrator::new(pendulum, StormerVerlet, 0.01).rattle();
+/// let z0 = rattle.project_to_hidden(&State::from_slices(&[0.6, -0.8], &[1.0, 0.5]))?;
+/// let z = rattle.run(z0, Stop::Steps(100)).execute().into_result().map_err(|(_, e)| e)?.last().unwrap();
+/// let mut g = [0.0];
+/// pendulum.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
+/// assert!(g[0].abs() < 1e-14); // on the rod, to round-off
+/// # Ok(())
+/// # }
+/// ```
+///
+/// With a default for every parameter the struct implements `Default`,
+/// and struct update syntax changes one parameter by name. Defaults for
+/// some parameters only are refused (at the first without one), as is a
+/// default that is not a number literal:
+///
+/// ```
+/// use shake::prelude::*;
+///
+/// constrained_system! {
+///     pub struct Pendulum {
+///         parameters { length = 1.0, gravity = 9.81 }
+///         dof q[2], p[2];
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+///         constraints { rod: q[0]^2 + q[1]^2 - length^2 }
+///     }
+/// }
+///
+/// # fn main() {
+/// assert_eq!(Pendulum::default(), Pendulum::new(1.0, 9.81));
+/// let long = Pendulum { length: 2.5, ..Pendulum::default() };
+/// assert_eq!((long.length, long.gravity), (2.5, 9.81));
+/// # }
+/// ```
+///
+/// ```compile_fail
+/// shake::constrained_system! {
+///     pub struct Pendulum {
+///         parameters { length = 1.0, gravity }
+///         dof q[2], p[2];
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+///         constraints { rod: q[0]^2 + q[1]^2 - length^2 }
+///     }
+/// }
+/// # fn main() {}
 /// ```
 ///
 /// A chain of `N` links, anchored at the origin:
 ///
-/// ```ignore
-/// # use shake::constrained_system;
+/// ```
+/// use shake::prelude::*;
+///
 /// constrained_system! {
 ///     pub struct Chain {
 ///         parameters { length, gravity }
@@ -66,13 +119,24 @@ use quote::quote;
 ///         }
 ///     }
 /// }
+///
+/// # fn main() {
+/// assert_eq!((Chain::DOF, Chain::CONSTRAINTS), (16, 8));
+/// assert_eq!(Chain::new(1.0, 9.81).constraint_name(3), "link[3]");
+/// // The chain hanging straight down satisfies every link.
+/// let q: Vec<f64> = (0..16).map(|j| if j % 2 == 1 { -((j / 2 + 1) as f64) } else { 0.0 }).collect();
+/// let mut g = [1.0; 8];
+/// Chain::new(1.0, 9.81).constraints(&q, &[0.0; 16], &mut g);
+/// assert_eq!(g, [0.0; 8]);
+/// # }
 /// ```
 ///
 /// # Grammar
 ///
 /// ```text
 /// system     := doc* vis? "struct" Name "{" item* "}"
-/// item       := "parameters" "{" name,* "}"           -- pub f64 fields, in `new(..)` order
+/// item       := "parameters" "{" param,* "}"          -- pub f64 fields, in `new(..)` order
+/// param      := name | name "=" "-"? number           -- all with defaults: `impl Default`
 ///             | "const" NAME "=" expr ";"             -- compile-time number (integer for indices)
 ///             | "dof" q "[" index "]" "," p "[" index "]" ";"   -- z = (q, p) ∈ R^{2d}
 ///             | "coordinates" name,+ ";" "momenta" name,+ ";"  -- named scalars, paired in order
@@ -106,7 +170,9 @@ use quote::quote;
 /// the holonomic constraint families of `constraints`; the runtime's
 /// `shake::runtime::particles` solves it.
 ///
-/// ```ignore
+/// ```
+/// use shake::constrained_system;
+///
 /// constrained_system! {
 ///     /// Rigid water: three distance constraints per molecule.
 ///     pub struct Water {
@@ -128,14 +194,26 @@ use quote::quote;
 ///         }
 ///     }
 /// }
+///
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
 /// let mut bonds = Water::bonds_table();          // Table::new(2, 1)
 /// bonds.push(&[0, 1], &[0.9572])?;
+/// bonds.push(&[0, 2], &[0.9572])?;
+/// bonds.push(&[1, 2], &[1.5139])?;
 /// let water = Water::new().system(vec![16.0, 1.0, 1.0], bonds)?;
+/// assert_eq!((water.particles(), water.constraints()), (3, 3));
+///
+/// let (springs, mut links) = (SpringChain::springs_table(), SpringChain::links_table());
+/// links.push(&[0, 1], &[1.0])?;
+/// let chain = SpringChain::new(100.0).system(vec![1.0; 2], springs, links)?;
+/// assert_eq!(chain.constraints(), 1);
+/// # Ok(())
+/// # }
 /// ```
 ///
 /// ```text
 /// system     := doc* vis? "struct" Name "{" pitem* "}"
-/// pitem      := "parameters" "{" name,* "}"
+/// pitem      := "parameters" "{" param,* "}"
 ///             | "particles" x "[" DIM "]" ("," p "[" DIM "]")? ";"   -- DIM an integer literal
 ///             | "potential" "{" family,* "}"
 ///             | "constraints" "{" family,* "}"
@@ -234,6 +312,78 @@ use quote::quote;
 /// coordinates (m > d, e.g. a family `link[k in 0..2000]` on `dof q[8]`) is
 /// refused right after lowering, before anything is differentiated: such a
 /// system can never be coisotropic with an invertible N.
+///
+/// (Each refusal's exact message is pinned by a trybuild case in the
+/// facade's `tests/ui/`; the examples below only show that it is refused.)
+/// A misspelt name, "did you mean `theta`?":
+///
+/// ```compile_fail
+/// shake::constrained_system! {
+///     pub struct Cone {
+///         parameters { length, gravity }
+///         coordinates theta, phi;
+///         momenta p_theta, p_phi;
+///         hamiltonian = (p_theta^2 + p_phi^2) / 2 - gravity * cos(thetta);
+///         constraints { cone: phi - length * theta }
+///     }
+/// }
+/// # fn main() {}
+/// ```
+///
+/// `**` for a power, "the power operator is `^`":
+///
+/// ```compile_fail
+/// shake::constrained_system! {
+///     pub struct Oscillator {
+///         dof q[1], p[1];
+///         hamiltonian = (p[0]**2 + q[0]**2) / 2;
+///     }
+/// }
+/// # fn main() {}
+/// ```
+///
+/// Constraints whose bracket {a, b} = 2q₀ does not vanish on M (not
+/// coisotropic, Section 3.2):
+///
+/// ```compile_fail
+/// shake::constrained_system! {
+///     pub struct Bad {
+///         dof q[2], p[2];
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2;
+///         constraints { a: q[0]^2 - 1, b: p[0] + q[1] }
+///     }
+/// }
+/// # fn main() {}
+/// ```
+///
+/// The same declarations with the mistake fixed compile (a `compile_fail`
+/// example that failed for another reason would prove nothing):
+///
+/// ```
+/// shake::constrained_system! {
+///     pub struct Cone {
+///         parameters { length, gravity }
+///         coordinates theta, phi;
+///         momenta p_theta, p_phi;
+///         hamiltonian = (p_theta^2 + p_phi^2) / 2 - gravity * cos(theta);
+///         constraints { cone: phi - length * theta }
+///     }
+/// }
+/// shake::constrained_system! {
+///     pub struct Oscillator {
+///         dof q[1], p[1];
+///         hamiltonian = (p[0]^2 + q[0]^2) / 2;
+///     }
+/// }
+/// shake::constrained_system! {
+///     pub struct Good {
+///         dof q[2], p[2];
+///         hamiltonian = (p[0]^2 + p[1]^2) / 2;
+///         constraints { a: q[0]^2 - 1, b: q[1] }
+///     }
+/// }
+/// # fn main() {}
+/// ```
 #[proc_macro]
 pub fn constrained_system(input: TokenStream) -> TokenStream {
     expand(input.into()).into()

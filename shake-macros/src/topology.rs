@@ -879,9 +879,8 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
     let name = &def.name;
     let params = &def.params;
     let dim = def.dim;
-    let field_docs = params
-        .iter()
-        .map(|p| format!(" The parameter `{p}` (a constant for differentiation)."));
+    let field_docs = crate::emit::field_docs(params, def.defaults.as_deref());
+    let default = crate::emit::default_impl(name, def.defaults.as_deref());
     let mut doc = format!(
         "\n\n# Declared system\n\nn particles in R^{dim} (n and the masses are given at run time, \
          to [`{name}::system`]), H = Σ_a |p_a|²/(2 m_a) + the potential families; holonomic \
@@ -1010,6 +1009,8 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
                 #body
             }
         }
+
+        #default
     }
 }
 

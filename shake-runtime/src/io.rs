@@ -21,7 +21,7 @@ use crate::trajectory::Trajectory;
 use std::io::{BufRead, Write};
 
 const MAGIC: &str = "# shake trajectory v1";
-const DIAG_COLUMNS: [&str; 8] = [
+pub(crate) const DIAG_COLUMNS: [&str; 8] = [
     "energy",
     "constraint",
     "hidden_constraint",
@@ -185,15 +185,7 @@ impl Trajectory {
         }
         let d = names.iter().filter(|n| n.starts_with("q[")).count();
         let diag = names.len() > 2 + 2 * d;
-        let mut expected: Vec<String> = vec!["t".into(), "step".into()];
-        expected.extend((0..d).map(|i| format!("q[{i}]")));
-        expected.extend((0..d).map(|i| format!("p[{i}]")));
-        if diag {
-            expected.extend(DIAG_COLUMNS.iter().map(|c| c.to_string()));
-            expected.extend((0..m).map(|j| format!("lambda[{j}]")));
-            expected.extend((0..m).map(|j| format!("sigma[{j}]")));
-        }
-        if names != expected {
+        if names != column_names(d, m, diag) {
             return Err(bad(
                 "the columns are not t, step, q[i], p[i] and the diagnostics",
             ));
@@ -234,26 +226,10 @@ impl Trajectory {
             for (c, x) in z.iter_mut().enumerate() {
                 *x = num(2 + c)?;
             }
-            let inconsistent = |what| CsvError::Inconsistent {
+            push_checked(&mut traj, step, t, &z).map_err(|what| CsvError::Inconsistent {
                 line: line_no,
                 what,
-            };
-            // The steps a run stores: 0, s, 2s, … and at most one more,
-            // before the next multiple of s (the push below relies on it).
-            let n = traj.len() as u64;
-            let after_extra = n > 0 && traj.step(n as usize - 1) != (n - 1) * stride;
-            let regular = step == n * stride;
-            let extra = n > 0 && step > (n - 1) * stride && step < n * stride;
-            if after_extra || !(regular || extra) {
-                return Err(inconsistent(
-                    "steps must be 0, s, 2s, … and at most one more",
-                ));
-            }
-            let n = n as usize;
-            traj.push(step, &z[..d], &z[d..]);
-            if traj.time(n).to_bits() != t.to_bits() {
-                return Err(inconsistent("t is not t0 + step·h"));
-            }
+            })?;
             if diag {
                 let b = 2 + 2 * d;
                 let f = |i| num(b + i);
@@ -278,6 +254,45 @@ impl Trajectory {
         traj.set_multipliers(m, multipliers);
         Ok(traj)
     }
+}
+
+/// The columns of a trajectory with d coordinates and m constraints, in
+/// file order (shared by the CSV and the Arrow layout).
+pub(crate) fn column_names(d: usize, m: usize, diag: bool) -> Vec<String> {
+    let mut names: Vec<String> = vec!["t".into(), "step".into()];
+    names.extend((0..d).map(|i| format!("q[{i}]")));
+    names.extend((0..d).map(|i| format!("p[{i}]")));
+    if diag {
+        names.extend(DIAG_COLUMNS.iter().map(|c| c.to_string()));
+        names.extend((0..m).map(|j| format!("lambda[{j}]")));
+        names.extend((0..m).map(|j| format!("sigma[{j}]")));
+    }
+    names
+}
+
+/// Appends the state z = (q, p) read at `step`, time `t`, after checking
+/// that a run could have stored it there: the steps a run stores are
+/// 0, s, 2s, … and at most one more before the next multiple of s (which
+/// [`Trajectory::push`] relies on), and t must be t0 + step·h to the bit.
+pub(crate) fn push_checked(
+    traj: &mut Trajectory,
+    step: u64,
+    t: f64,
+    z: &[f64],
+) -> Result<(), &'static str> {
+    let (d, _, _, stride) = traj.layout();
+    let n = traj.len() as u64;
+    let after_extra = n > 0 && traj.step(n as usize - 1) != (n - 1) * stride;
+    let regular = step == n * stride;
+    let extra = n > 0 && step > (n - 1) * stride && step < n * stride;
+    if after_extra || !(regular || extra) {
+        return Err("steps must be 0, s, 2s, … and at most one more");
+    }
+    traj.push(step, &z[..d], &z[d..]);
+    if traj.time(n as usize).to_bits() != t.to_bits() {
+        return Err("t is not t0 + step·h");
+    }
+    Ok(())
 }
 
 /// (t0, h, stride, m) from the first line.

@@ -42,7 +42,10 @@
 //! - [`fibre`]: the fibre flows exp(Σ λ_i X_{g_i}), exact to round-off.
 //! - [`newton`]: every implicit equation is solved to round-off.
 //! - [`diagnostics`] and [`error`]: what a run measures, and how it fails.
-//! - [`io`]: a trajectory as CSV and back.
+//! - [`io`]: a trajectory as CSV and back; with the `arrow` feature,
+//!   `io_arrow`: as an Arrow IPC (Feather v2) file and back.
+//! - with the `progress` feature, `progress`: an indicatif bar on a run's
+//!   per-step hook.
 #![warn(missing_docs)]
 // Numerical kernels index several arrays with one loop variable, as the
 // formulas do; iterator chains would hide them.
@@ -65,9 +68,14 @@ pub mod fibre;
 pub mod guard;
 pub mod integrator;
 pub mod io;
+#[cfg(feature = "arrow")]
+pub mod io_arrow;
+mod keep_positions;
 mod linalg;
 pub mod newton;
 pub mod particles;
+#[cfg(feature = "progress")]
+pub mod progress;
 pub mod rattle;
 pub mod run;
 mod shake;

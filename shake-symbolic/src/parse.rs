@@ -6,7 +6,6 @@
 
 use proc_macro2::Span;
 use syn::parse::{Parse, ParseStream};
-use syn::punctuated::Punctuated;
 use syn::{
     braced, bracketed, parenthesized, token, Attribute, Ident, LitFloat, LitInt, Token, Visibility,
 };
@@ -17,6 +16,10 @@ pub struct SystemDef {
     pub vis: Visibility,
     pub name: Ident,
     pub params: Vec<Ident>,
+    /// The parameters' defaults (`parameters { length = 1.0, .. }`), in
+    /// order; `Some` only when every parameter has one (then the struct
+    /// implements `Default`).
+    pub defaults: Option<Vec<f64>>,
     pub consts: Vec<(Ident, Expr)>,
     pub dof: Dof,
     pub lets: Vec<(Ident, Expr)>,
@@ -97,6 +100,83 @@ pub enum ExprKind {
     If(Cond, Box<Expr>, Box<Expr>),
 }
 
+/// `name, ..` or `name = default, ..`: the parameters and, when every one
+/// has a default, the defaults. A default is a number literal with an
+/// optional sign; some with and some without is refused at the first
+/// without (a `Default` impl needs them all, and silently not generating
+/// it would surface far away, where `Default` is used).
+pub(crate) fn parse_parameters(input: ParseStream) -> syn::Result<(Vec<Ident>, Option<Vec<f64>>)> {
+    let mut params = Vec::new();
+    let mut defaults: Vec<Option<f64>> = Vec::new();
+    while !input.is_empty() {
+        let name: Ident = input.parse()?;
+        let default = if input.peek(Token![=]) {
+            input.parse::<Token![=]>()?;
+            Some(parse_default(input, &name)?)
+        } else {
+            None
+        };
+        params.push(name);
+        defaults.push(default);
+        if input.is_empty() {
+            break;
+        }
+        input.parse::<Token![,]>()?;
+    }
+    let with = defaults.iter().filter(|d| d.is_some()).count();
+    if with == 0 {
+        return Ok((params, None));
+    }
+    if let Some(k) = defaults.iter().position(Option::is_none) {
+        let given = &params[defaults.iter().position(Option::is_some).unwrap_or(0)];
+        return Err(syn::Error::new(
+            params[k].span(),
+            format!(
+                "parameter `{}` has no default, but `{given}` has one: give every parameter a \
+                 default (`{} = 1.0`) to get `impl Default`, or none",
+                params[k], params[k]
+            ),
+        ));
+    }
+    Ok((params, Some(defaults.into_iter().flatten().collect())))
+}
+
+/// The default after `name =`: `-`? then a float or integer literal,
+/// finite as an f64.
+fn parse_default(input: ParseStream, name: &Ident) -> syn::Result<f64> {
+    let neg = input.parse::<Option<Token![-]>>()?.is_some();
+    let bad = |span: Span| {
+        syn::Error::new(
+            span,
+            format!(
+                "the default of parameter `{name}` must be a number literal, e.g. `{name} = 1.0` \
+                 (expressions, constants and other parameters are not evaluated here)"
+            ),
+        )
+    };
+    let (value, span) = if input.peek(LitFloat) {
+        let l: LitFloat = input.parse()?;
+        (l.base10_parse::<f64>()?, l.span())
+    } else if input.peek(LitInt) {
+        let l: LitInt = input.parse()?;
+        (l.base10_parse::<f64>()?, l.span())
+    } else {
+        return Err(bad(input.span()));
+    };
+    // Anything after the literal but before the next `,` (an operator, a
+    // call) would be an expression: refused at it.
+    if !input.is_empty() && !input.peek(Token![,]) {
+        return Err(bad(input.span()));
+    }
+    if !value.is_finite() {
+        return Err(syn::Error::new(
+            span,
+            format!("the default of parameter `{name}` is not a finite f64"),
+        ));
+    }
+    Ok(if neg { -value } else { value })
+}
+
 fn kw(input: ParseStream, word: &str) -> bool {
     input.fork().parse::<Ident>().is_ok_and(|i| i == word)
 }
@@ -113,6 +193,7 @@ impl Parse for SystemDef {
             return Err(input.error("unexpected tokens after the system's `{ ... }`"));
         }
         let mut params = Vec::new();
+        let mut defaults = None;
         let mut consts = Vec::new();
         let mut dof: Option<Dof> = None;
         let mut coords: Option<(Span, Vec<Ident>)> = None;
@@ -142,9 +223,7 @@ impl Parse for SystemDef {
                 }
                 let c;
                 braced!(c in body);
-                params = Punctuated::<Ident, Token![,]>::parse_terminated(&c)?
-                    .into_iter()
-                    .collect();
+                (params, defaults) = parse_parameters(&c)?;
                 let _ = body.parse::<Option<Token![;]>>()?;
             } else if kw(&body, "dof") {
                 let k: Ident = body.parse()?;
@@ -251,6 +330,7 @@ impl Parse for SystemDef {
             vis,
             name,
             params,
+            defaults,
             consts,
             dof,
             lets,

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! system   := doc* vis? "struct" Name "{" item* "}"
-//! item     := "parameters" "{" name,* "}"
+//! item     := "parameters" "{" (name ("=" number)?),* "}"
 //!           | "particles" x "[" DIM "]" ("," p "[" DIM "]")? ";"
 //!           | "potential" "{" family,* "}"
 //!           | "constraints" "{" family,* "}"
@@ -15,7 +15,6 @@
 use crate::parse::{parse_expr, Expr};
 use proc_macro2::{Span, TokenStream, TokenTree};
 use syn::parse::{Parse, ParseStream};
-use syn::punctuated::Punctuated;
 use syn::{braced, bracketed, parenthesized, token, Attribute, Ident, LitInt, Token, Visibility};
 
 /// True when the declaration's body has a top-level `particles x` item: the
@@ -66,6 +65,9 @@ pub struct ParticleDef {
     pub vis: Visibility,
     pub name: Ident,
     pub params: Vec<Ident>,
+    /// The parameters' defaults, when every one has one (as in
+    /// [`SystemDef`](crate::parse::SystemDef)).
+    pub defaults: Option<Vec<f64>>,
     /// The position array `x`.
     pub x: Ident,
     /// The momentum array, `p` unless declared otherwise.
@@ -108,6 +110,7 @@ impl Parse for ParticleDef {
             return Err(input.error("unexpected tokens after the system's `{ ... }`"));
         }
         let mut params: Option<Vec<Ident>> = None;
+        let mut defaults = None;
         let mut particles: Option<(Ident, Ident, usize, Span)> = None;
         let mut families = Vec::new();
         let mut seen_blocks: Vec<Ident> = Vec::new();
@@ -119,11 +122,9 @@ impl Parse for ParticleDef {
                 }
                 let c;
                 braced!(c in body);
-                params = Some(
-                    Punctuated::<Ident, Token![,]>::parse_terminated(&c)?
-                        .into_iter()
-                        .collect(),
-                );
+                let (names, given) = crate::parse::parse_parameters(&c)?;
+                params = Some(names);
+                defaults = given;
                 let _ = body.parse::<Option<Token![;]>>()?;
             } else if kw(&body, "particles") {
                 let k: Ident = body.parse()?;
@@ -194,6 +195,7 @@ impl Parse for ParticleDef {
             vis,
             name,
             params: params.unwrap_or_default(),
+            defaults,
             x,
             p,
             dim,
