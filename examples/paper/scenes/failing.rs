@@ -132,6 +132,8 @@ fn crossing(claims: &mut Claims) -> PlotResult<()> {
             matches!(
                 e,
                 StepError::NondegeneracyLost { .. }
+                    | StepError::SingularNondegeneracyMatrix { .. }
+                    | StepError::SingularShakeJacobian { .. }
                     | StepError::ComponentJump { .. }
                     | StepError::NewtonNotConverged { .. }
                     | StepError::FibreJump { .. }

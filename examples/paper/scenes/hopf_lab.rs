@@ -674,6 +674,8 @@ impl FoldRun {
             self.error,
             Some(
                 StepError::NondegeneracyLost { .. }
+                    | StepError::SingularNondegeneracyMatrix { .. }
+                    | StepError::SingularShakeJacobian { .. }
                     | StepError::ComponentJump { .. }
                     | StepError::FibreJump { .. }
                     | StepError::NewtonNotConverged { .. }
