@@ -16,6 +16,7 @@
 
 use crate::base_map::BaseMap;
 use crate::error::StepError;
+use crate::guard::Guard;
 use crate::integrator::Integrator;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
@@ -57,24 +58,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 value: m as f64,
             });
         }
-        if !z.is_finite() {
-            return Err(StepError::NonFinite {
-                what: "initial state",
-                step: 0,
-                t: 0.0,
-            });
-        }
+        Guard::finite(z.q.as_slice(), z.p.as_slice(), "initial state", 0, 0.0)?;
         let mut g = vec![0.0; m];
         sys.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
         let residual = g.iter().fold(0.0f64, |r, x| r.max(x.abs()));
-        let tolerance = self.options().constraint_tolerance;
-        if !(residual <= tolerance) {
-            return Err(StepError::NotOnConstraint {
-                step: 0,
-                t: 0.0,
-                residual,
-                tolerance,
-            });
+        if !(residual <= self.options().constraint_tolerance) {
+            return Err(self.off_m(z.q.as_slice(), z.p.as_slice(), None));
         }
         let out = self.project(z)?;
         // X_g of a holonomic g has no q component, so even a numerically
