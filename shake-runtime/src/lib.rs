@@ -62,15 +62,18 @@ pub mod ensemble_store;
 pub mod error;
 pub mod examples;
 pub mod fibre;
+pub mod guard;
 pub mod integrator;
 pub mod io;
 mod linalg;
 pub mod newton;
 pub mod particles;
 pub mod rattle;
+pub mod run;
 mod shake;
 pub mod solver;
 mod state;
+pub mod step;
 pub mod system;
 mod trajectory;
 mod unconstrained;
@@ -81,7 +84,9 @@ pub use diagnostics::DiagnosticRecord;
 pub use ensemble::{ensemble, run_ensemble};
 pub use error::{SolveError, Stage, StepError};
 pub use fibre::FibreFlow;
-pub use integrator::{Integrator, Method, Options, Run, RunOutcome, StepInfo, Stop, Trajectory};
+pub use integrator::{
+    Integrator, Method, Options, Run, RunOutcome, StepEvent, StepInfo, Stop, Trajectory,
+};
 /// The MPI bindings (rsmpi) the distributed ensembles use, for initialising
 /// MPI and naming communicators.
 #[cfg(feature = "mpi")]

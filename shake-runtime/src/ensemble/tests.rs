@@ -1,0 +1,143 @@
+use super::*;
+use crate::error::{SolveError, Stage, StepError};
+use crate::examples::Pendulum;
+use crate::{Stop, StormerVerlet};
+
+fn bits(k: usize, out: &RunOutcome) -> Vec<u64> {
+    let mut w = Vec::new();
+    pack_outcome(k, out, &mut w);
+    w
+}
+
+/// A member's outcome must not depend on which members ran before it
+/// on the same integrator (a rayon worker or an MPI rank reuses one):
+/// an integrator that has run another member first gives the same bits
+/// as a fresh one. (SHAKE's difference-quotient scale used to be kept
+/// from the first run, which changed the last bits of later ones.)
+#[test]
+fn a_member_does_not_depend_on_its_predecessors() {
+    let p = Pendulum::default();
+    let template = Integrator::new(p, StormerVerlet, 0.01).rattle();
+    for k in 1..8 {
+        let z = p.state(0.4 * k as f64, (k as f64).sin());
+        let fresh = template
+            .clone()
+            .run(z.clone(), Stop::Steps(200))
+            .stride(50)
+            .execute();
+        let mut reused = template.clone();
+        let _ = reused.run(p.state(0.05, 0.0), Stop::Steps(10)).execute();
+        let again = reused.run(z, Stop::Steps(200)).stride(50).execute();
+        assert_eq!(bits(k, &fresh), bits(k, &again), "member {k}");
+    }
+}
+
+/// Every error variant reads back as itself, after the trajectory and
+/// diagnostics; a truncated record is an error at every cut.
+#[test]
+fn every_error_round_trips() {
+    let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.05)
+        .rattle()
+        .with_diagnostics();
+    let mut out = integ
+        .run(Pendulum::default().state(1.0, -0.3), Stop::Steps(9))
+        .stride(4)
+        .execute();
+    assert_eq!(out.trajectory.diagnostics.len(), 4);
+    let errors = [
+        StepError::InvalidInput {
+            what: "stride must be at least 1",
+            value: -0.0,
+        },
+        StepError::NonFinite {
+            what: "a message that is longer than eight bytes",
+            step: 3,
+            t: f64::NAN,
+        },
+        StepError::NewtonNotConverged {
+            stage: Stage::BaseMap,
+            step: u64::MAX,
+            t: 1.5,
+            source: SolveError::NotConverged {
+                iterations: 50,
+                residual: 1e-3,
+            },
+        },
+        StepError::NewtonNotConverged {
+            stage: Stage::Fibre,
+            step: 1,
+            t: 0.0,
+            source: SolveError::Singular { iterations: 2 },
+        },
+        StepError::NewtonNotConverged {
+            stage: Stage::ProjectionOntoM,
+            step: 1,
+            t: 0.0,
+            source: SolveError::NonFinite { iterations: 7 },
+        },
+        StepError::NondegeneracyLost {
+            stage: Stage::Rattle,
+            step: 4,
+            t: 0.2,
+            condition: f64::INFINITY,
+            limit: 1e12,
+        },
+        StepError::ComponentJump {
+            step: 5,
+            t: 0.25,
+            det_before: 1.0,
+            det_after: -2.0,
+        },
+        StepError::FibreJump {
+            stage: Stage::Shake,
+            step: 6,
+            t: 0.3,
+            lambda: 2.0,
+            predicted: 1e-3,
+        },
+        StepError::NotOnConstraint {
+            step: 0,
+            t: 0.0,
+            residual: 0.1,
+            tolerance: 1e-10,
+        },
+    ];
+    for e in errors {
+        out.error = Some(e.clone());
+        let w = bits(11, &out);
+        let (k, back, used) = unpack_outcome(&w).unwrap();
+        assert_eq!((k, used), (11, w.len()));
+        assert_eq!(bits(11, &back), w, "{e}");
+        assert_eq!(back.error.unwrap().to_string(), e.to_string());
+        for cut in 0..w.len() {
+            assert!(unpack_outcome(&w[..cut]).is_err(), "cut {cut} of {e}");
+        }
+    }
+}
+
+/// Records follow each other in one buffer (as in a gather).
+#[test]
+fn records_concatenate() {
+    let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    let outs: Vec<_> = (0..3)
+        .map(|k| {
+            integ
+                .run(
+                    Pendulum::default().state(0.1 * k as f64, 0.0),
+                    Stop::Steps(k),
+                )
+                .execute()
+        })
+        .collect();
+    let mut w = Vec::new();
+    for (k, o) in outs.iter().enumerate() {
+        pack_outcome(10 + k, o, &mut w);
+    }
+    let mut rest = &w[..];
+    for (k, o) in outs.iter().enumerate() {
+        let (member, back, used) = unpack_outcome(rest).unwrap();
+        assert_eq!((member, &back), (10 + k, o));
+        rest = &rest[used..];
+    }
+    assert!(rest.is_empty());
+}

@@ -1,0 +1,339 @@
+//! The guard: every check a step must pass, in one type, run once per step
+//! and configured in one place ([`Options`]).
+//!
+//! A step map (see [`step`](crate::step)) computes; the guard decides
+//! whether its result may be kept. The checks, in the order they run:
+//!
+//! - **finite**: no NaN or infinity in the new state;
+//! - **on M**: ‖g(z1)‖∞ ≤ [`Options::constraint_tolerance`] (SHAKE's Newton
+//!   stops on the size of its updates, so far outside its basin it can stop
+//!   off M);
+//! - **nondegeneracy** (the paper's Assumption 1.1): the condition of
+//!   N_ij = {{H,g_i},g_j} relative to its size at the start stays below
+//!   [`Options::max_condition`];
+//! - **component**: det N keeps its sign (a sign change means the step
+//!   crossed or jumped over a singular N onto another component of M^H,
+//!   Section 5.4.2 case iii);
+//! - **fibre jump**: the converged fibre displacement (SHAKE's λ, the
+//!   projection's σ) stays within [`Options::jump_ratio`] of its own linear
+//!   prediction, so Newton found the nearby crossing of the fibre.
+//!
+//! The guard keeps the little state these checks need across steps: ‖N‖₁
+//! at the start of the run and det N at the previous state.
+
+use crate::error::{SolveError, Stage, StepError};
+use crate::linalg::norm_inf;
+use crate::newton::NewtonOptions;
+use crate::rattle::{check_nondegeneracy, NondegeneracyCheck, ProjectionReport};
+use crate::shake::{ShakeReport, Workspace};
+use crate::step::StepInfo;
+use crate::system::ConstrainedSystem;
+
+/// Tolerances, limits and checks of an [`Integrator`](crate::Integrator).
+///
+/// ```
+/// use shake_runtime::Options;
+/// let opts = Options { max_condition: 1e6, ..Options::default() };
+/// assert_eq!(opts.jump_ratio, 1.0);
+/// ```
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Options {
+    /// Every Newton iteration of a step.
+    pub newton: NewtonOptions,
+    /// A state handed to [`Integrator::step`](crate::Integrator::step) or [`Integrator::run`](crate::Integrator::run) must
+    /// satisfy ‖g‖∞ ≤ this (default 1e-8), else
+    /// [`StepError::NotOnConstraint`]. Every (sub)step's result must too,
+    /// else [`StepError::NewtonNotConverged`] in [`Stage::Shake`] (SHAKE's
+    /// Newton stopped far from a root, which only happens for absurd h).
+    pub constraint_tolerance: f64,
+    /// After every step N is evaluated at the new state; the step fails with
+    /// [`StepError::NondegeneracyLost`] when max(‖N‖₁, ‖N₀‖₁) · ‖N⁻¹‖₁ exceeds
+    /// this (default 1e10), N₀ being N at the start of the run. For m ≥ 2
+    /// this bounds the condition number κ₁(N); for m = 1 it says N shrank by
+    /// that factor since the start.
+    pub max_condition: f64,
+    /// SHAKE's Newton iteration starts from λ = 0, and its first iterate λ₁
+    /// is the linear prediction of the fibre displacement, of order h. The
+    /// converged λ differs from it by O(h)·‖λ₁‖ when the solution is the
+    /// nearby one; the step fails with [`StepError::FibreJump`] when
+    /// ‖λ − λ₁‖∞ > `jump_ratio` · ‖λ₁‖∞ + 1e-8·|h| (default 1: the
+    /// correction is as large as the prediction itself). The projection Π
+    /// onto M^H is held to the same test with its σ, wherever a run
+    /// projects (every step, or only the stored states): near a fold of
+    /// M^H (Section 5.4.2, case iii) it is Π that would otherwise land on
+    /// another crossing of the fibre. `f64::INFINITY` turns the check off.
+    pub jump_ratio: f64,
+    /// Check after every step that det N kept its sign
+    /// ([`StepError::ComponentJump`]) (default true).
+    pub check_component: bool,
+    /// In a RATTLE [`Run`](crate::Run), project onto M^H after every step instead of only
+    /// at the states that are stored or observed (default false; both give
+    /// the same states to round-off, by Π ∘ S_hᵏ = Π ∘ R_hᵏ).
+    pub project_every_step: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            newton: NewtonOptions::default(),
+            constraint_tolerance: 1e-8,
+            max_condition: 1e10,
+            jump_ratio: 1.0,
+            check_component: true,
+            project_every_step: false,
+        }
+    }
+}
+
+/// The checks of [`Options`] and the state they carry from step to step.
+#[derive(Clone, Debug)]
+pub(crate) struct Guard {
+    /// The limits, in one place.
+    pub(crate) options: Options,
+    /// ‖N‖₁ at the start of the run (or step): the scale the condition of
+    /// N is measured against.
+    reference_norm: f64,
+    /// det N at the previous state (NaN before the first).
+    det_prev: f64,
+    /// ‖N‖₁ at the result of the last substep.
+    last_norm: f64,
+}
+
+impl Guard {
+    pub(crate) fn new(options: Options) -> Self {
+        Guard {
+            options,
+            reference_norm: f64::NAN,
+            det_prev: f64::NAN,
+            last_norm: f64::NAN,
+        }
+    }
+
+    /// ‖N‖₁ and det N at the last accepted state.
+    pub(crate) fn last(&self) -> (f64, f64) {
+        (self.last_norm, self.det_prev)
+    }
+
+    /// Continues from a state this guard already accepted (its ‖N‖₁ and
+    /// det N), instead of evaluating and factorising N there again.
+    pub(crate) fn resume(&mut self, norm: f64, det: f64) {
+        self.reference_norm = norm;
+        self.det_prev = det;
+    }
+
+    /// A starting state: finite, on M, N well conditioned there. Sets the
+    /// reference ‖N‖₁ and det N to it.
+    pub(crate) fn start<S: ConstrainedSystem>(
+        &mut self,
+        sys: &S,
+        q: &[f64],
+        p: &[f64],
+        ws: &mut Workspace,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        Self::finite(q, p, "initial state", step, t)?;
+        self.reference_norm = f64::NAN;
+        self.det_prev = f64::NAN;
+        if sys.constraint_count() == 0 {
+            return Ok(());
+        }
+        sys.constraints(q, p, &mut ws.g);
+        let r = norm_inf(&ws.g);
+        if !(r <= self.options.constraint_tolerance) {
+            return Err(StepError::NotOnConstraint {
+                step,
+                t,
+                residual: r,
+                tolerance: self.options.constraint_tolerance,
+            });
+        }
+        let nd = check_nondegeneracy(sys, q, p, ws);
+        let cond = nd.condition(0.0);
+        if !(cond <= self.options.max_condition) {
+            return Err(StepError::NondegeneracyLost {
+                stage: Stage::Shake,
+                step,
+                t,
+                condition: cond,
+                limit: self.options.max_condition,
+            });
+        }
+        self.reference_norm = nd.norm;
+        self.det_prev = nd.det;
+        Ok(())
+    }
+
+    /// No NaN or infinity in (q, p).
+    pub(crate) fn finite(
+        q: &[f64],
+        p: &[f64],
+        what: &'static str,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        if q.iter().chain(p).all(|x| x.is_finite()) {
+            Ok(())
+        } else {
+            Err(StepError::NonFinite { what, step, t })
+        }
+    }
+
+    /// The fibre-jump test shared by SHAKE's λ and the projection's σ: the
+    /// Newton correction beyond the first (linear) iterate must stay below
+    /// `jump_ratio` times that prediction (plus 1e-8·|h| so that a step
+    /// starting exactly on M^H, where the prediction is 0, passes).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn jump(
+        &self,
+        stage: Stage,
+        correction: f64,
+        predicted: f64,
+        found: f64,
+        h: f64,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        if correction > self.options.jump_ratio * predicted + 1e-8 * h.abs() {
+            return Err(StepError::FibreJump {
+                stage,
+                step,
+                t,
+                lambda: found,
+                predicted,
+            });
+        }
+        Ok(())
+    }
+
+    /// The projection Π of a step: its σ must be the nearby crossing.
+    pub(crate) fn after_projection(
+        &self,
+        pr: &ProjectionReport,
+        h: f64,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        self.jump(
+            Stage::Rattle,
+            pr.correction,
+            pr.predicted,
+            pr.displacement,
+            h,
+            step,
+            t,
+        )
+    }
+
+    /// Every check after a SHAKE (sub)step, the same on both paths: g(z1)
+    /// within the constraint tolerance, N's condition and the sign of det N,
+    /// and λ against its linear prediction. `ws.g` holds g at the new state;
+    /// `info` receives N's condition and determinant.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn after_shake<S: ConstrainedSystem>(
+        &mut self,
+        sys: &S,
+        q: &[f64],
+        p: &[f64],
+        ws: &mut Workspace,
+        report: &ShakeReport,
+        info: &mut StepInfo,
+        projected: bool,
+        h: f64,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        let opts = &self.options;
+        // NaN-propagating maximum.
+        let residual = ws.g.iter().fold(0.0f64, |a, x| {
+            if x.is_nan() || x.abs() > a {
+                x.abs()
+            } else {
+                a
+            }
+        });
+        if !(residual <= opts.constraint_tolerance) {
+            return Err(StepError::NewtonNotConverged {
+                stage: Stage::Shake,
+                step,
+                t,
+                source: SolveError::NotConverged {
+                    iterations: report.iterations,
+                    residual,
+                },
+            });
+        }
+        let nd = check_nondegeneracy(sys, q, p, ws);
+        info.condition = nd.condition(self.reference_norm);
+        info.det_n = nd.det;
+        if !(info.condition <= opts.max_condition) {
+            return Err(StepError::NondegeneracyLost {
+                stage: if projected {
+                    Stage::Rattle
+                } else {
+                    Stage::Shake
+                },
+                step,
+                t,
+                condition: info.condition,
+                limit: opts.max_condition,
+            });
+        }
+        self.component(&nd, step, t)?;
+        self.det_prev = nd.det;
+        self.last_norm = nd.norm;
+        self.jump(
+            Stage::Shake,
+            report.lambda_correction,
+            report.lambda_predicted,
+            report.lambda,
+            h,
+            step,
+            t,
+        )
+    }
+
+    /// A state projected onto M^H only when it is stored (a RATTLE run that
+    /// steps with SHAKE): σ must be the nearby crossing of the fibre, on the
+    /// component the run is on.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn after_lazy_projection<S: ConstrainedSystem>(
+        &self,
+        sys: &S,
+        q: &[f64],
+        p: &[f64],
+        ws: &mut Workspace,
+        pr: &ProjectionReport,
+        h: f64,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        self.after_projection(pr, h, step, t)?;
+        if self.options.check_component && sys.constraint_count() > 0 {
+            let nd = check_nondegeneracy(sys, q, p, ws);
+            self.component(&nd, step, t)?;
+        }
+        Ok(())
+    }
+
+    /// det N kept the sign it had at the previous state.
+    fn component(&self, nd: &NondegeneracyCheck, step: u64, t: f64) -> Result<(), StepError> {
+        if self.options.check_component
+            && self.det_prev.is_finite()
+            && nd.det.signum() != self.det_prev.signum()
+        {
+            return Err(StepError::ComponentJump {
+                step,
+                t,
+                det_before: self.det_prev,
+                det_after: nd.det,
+            });
+        }
+        Ok(())
+    }
+
+    /// The Newton options of every solve of a step.
+    pub(crate) fn newton(&self) -> &NewtonOptions {
+        &self.options.newton
+    }
+}

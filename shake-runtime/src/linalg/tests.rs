@@ -1,0 +1,137 @@
+//! Tests of the dense and banded kernels against direct computations.
+
+use super::*;
+
+#[test]
+fn lu_solves_and_transposed_solves() {
+    // A = [[2, 1, 0], [1, 3, 1], [0, 1, 0.5]] column-major.
+    let a0 = [2.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 0.5];
+    let mut lu = a0;
+    let mut piv = [0; 3];
+    lu_factor(&mut lu, 3, &mut piv).unwrap();
+    let x_true = [1.0, -2.0, 0.5];
+    for transpose in [false, true] {
+        let mut b = [0.0; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                let aij = if transpose {
+                    a0[j + i * 3]
+                } else {
+                    a0[i + j * 3]
+                };
+                b[i] += aij * x_true[j];
+            }
+        }
+        if transpose {
+            lu_solve_transpose(&lu, 3, &piv, &mut b);
+        } else {
+            lu_solve(&lu, 3, &piv, &mut b);
+        }
+        for i in 0..3 {
+            assert!((b[i] - x_true[i]).abs() < 1e-14);
+        }
+    }
+    // det = 2(1.5 - 1) - 1(0.5 - 0) = 0.5
+    assert!((lu_det(&lu, 3, &piv) - 0.5).abs() < 1e-14);
+    let mut x = [0.0; 3];
+    let mut z = [0.0; 3];
+    let est = inverse_norm1_estimate(&lu, 3, &piv, &mut x, &mut z);
+    // A⁻¹ = [[1, -1, 2], [-1, 2, -4], [2, -4, 10]]: ‖A⁻¹‖₁ = 16.
+    assert!((est - 16.0).abs() < 1e-12, "{est}");
+}
+
+/// A random-looking n×n matrix with the given band, diagonally weak so
+/// that partial pivoting actually swaps rows.
+fn banded(n: usize, band: Band) -> Vec<f64> {
+    let mut a = vec![0.0; n * n];
+    let mut x = 0.3f64;
+    for j in 0..n {
+        for i in j.saturating_sub(band.upper)..=(j + band.lower).min(n - 1) {
+            x = (x * 3.7 + 0.11).fract();
+            a[i + j * n] = x - 0.5 + if i == j { 0.05 } else { 0.0 };
+        }
+    }
+    a
+}
+
+#[test]
+fn banded_lu_agrees_with_dense_lu() {
+    let n = 40;
+    for band in [
+        Band { lower: 1, upper: 1 },
+        Band { lower: 2, upper: 0 },
+        Band { lower: 0, upper: 3 },
+        Band { lower: 3, upper: 2 },
+    ] {
+        let a0 = banded(n, band);
+        assert_eq!(Band::of(&a0, n), band);
+        let x_true: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        // b = A x and c = Aᵀ x.
+        let mut b = vec![0.0; n];
+        let mut c = vec![0.0; n];
+        for i in 0..n {
+            for j in 0..n {
+                b[i] += a0[i + j * n] * x_true[j];
+                c[i] += a0[j + i * n] * x_true[j];
+            }
+        }
+        let mut dense = a0.clone();
+        let mut piv_d = vec![0; n];
+        lu_factor(&mut dense, n, &mut piv_d).unwrap();
+        let mut lu = a0.clone();
+        let mut piv = vec![0; n + 2];
+        lu_factor(&mut lu, n, &mut piv).unwrap();
+        assert_eq!(recorded_band(&piv, n), Some(band), "auto-detected band");
+        let (mut xb, mut xc) = (b.clone(), c.clone());
+        lu_solve(&lu, n, &piv, &mut xb);
+        lu_solve_transpose(&lu, n, &piv, &mut xc);
+        // Against the dense solves (these random matrices can be badly
+        // conditioned, so x_true itself is only the scale).
+        let (mut db, mut dc) = (b.clone(), c.clone());
+        lu_solve(&dense, n, &piv_d, &mut db);
+        lu_solve_transpose(&dense, n, &piv_d, &mut dc);
+        let scale = norm_inf(&db).max(norm_inf(&dc));
+        for i in 0..n {
+            assert!((xb[i] - db[i]).abs() < 1e-9 * scale, "{band:?} {i}");
+            assert!((xc[i] - dc[i]).abs() < 1e-9 * scale, "{band:?} {i}");
+        }
+        // Residuals of the banded solves.
+        for i in 0..n {
+            let (mut rb, mut rc) = (-b[i], -c[i]);
+            for j in 0..n {
+                rb += a0[i + j * n] * xb[j];
+                rc += a0[j + i * n] * xc[j];
+            }
+            assert!(
+                rb.abs() < 1e-10 * scale && rc.abs() < 1e-10 * scale,
+                "{band:?} {i}"
+            );
+        }
+        let (dd, db) = (lu_det(&dense, n, &piv_d), lu_det(&lu, n, &piv));
+        assert!((dd - db).abs() <= 1e-10 * dd.abs(), "{dd} {db}");
+        let (mut s1, mut s2) = (vec![0.0; n], vec![0.0; n]);
+        let ed = inverse_norm1_estimate(&dense, n, &piv_d, &mut s1, &mut s2);
+        let eb = inverse_norm1_estimate(&lu, n, &piv, &mut s1, &mut s2);
+        assert!((ed - eb).abs() <= 1e-8 * ed, "{ed} {eb}");
+    }
+}
+
+#[test]
+fn singular_is_reported() {
+    let mut a = [1.0, 2.0, 2.0, 4.0];
+    let mut piv = [0; 2];
+    assert_eq!(lu_factor(&mut a, 2, &mut piv), Err(Singular));
+}
+
+#[test]
+fn expm_of_a_generator_of_rotations() {
+    let theta = 7.3;
+    let mut a = [0.0, theta, -theta, 0.0];
+    let (mut t1, mut t2, mut t3) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+    expm(&mut a, 2, &mut t1, &mut t2, &mut t3);
+    let (c, s) = (theta.cos(), theta.sin());
+    let want = [c, s, -s, c];
+    for i in 0..4 {
+        assert!((a[i] - want[i]).abs() < 1e-14, "{a:?} {want:?}");
+    }
+}

@@ -1,0 +1,487 @@
+//! The driver: a run of many steps from an initial state until a stop
+//! rule, with a stride, storage of the states in a [`Trajectory`],
+//! diagnostics, observers, and on error the partial trajectory up to the
+//! last good state.
+//!
+//! - this file: [`Stop`], [`RunOutcome`], the [`Run`] builder and its loop;
+//! - `record`: storing (and for a lazily projected RATTLE
+//!   run, projecting) one state;
+//! - `event`: what an `on_step` observer sees.
+//!
+//! The step itself is the [`step`](crate::step) maps'; the checks are the
+//! [`guard`](crate::guard)'s.
+
+mod event;
+mod record;
+
+use std::ops::ControlFlow;
+
+pub use event::{StepEvent, StepObserver};
+
+use crate::base_map::BaseMap;
+use crate::diagnostics::Accumulator;
+use crate::error::StepError;
+use crate::integrator::Integrator;
+use crate::rattle::project_hidden;
+use crate::state::State;
+use crate::step::Method;
+use crate::system::ConstrainedSystem;
+use crate::trajectory::Trajectory;
+
+/// When a run stops.
+///
+/// ```
+/// use shake_runtime::Stop;
+/// let a = Stop::Steps(100);
+/// let b = Stop::Time(1.0);
+/// assert_ne!(a, b);
+/// ```
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum Stop {
+    /// After this many steps.
+    Steps(u64),
+    /// At this time (from the run's start time): the run takes
+    /// n = (T − t0)/h steps, rounded to the nearest integer when within
+    /// 1e-9 of it and up otherwise (the step size never changes).
+    Time(f64),
+}
+
+/// The result of a run: the trajectory computed so far and, if the run
+/// stopped early, why. On an error the last good state is always stored.
+///
+/// ```
+/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+/// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(3)).execute();
+/// let traj = out.into_result().unwrap();
+/// assert_eq!(traj.len(), 4);
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunOutcome {
+    /// Everything stored before the run ended.
+    pub trajectory: Trajectory,
+    /// Why the run ended early, if it did.
+    pub error: Option<StepError>,
+}
+
+impl RunOutcome {
+    /// `Ok(trajectory)` or `Err((partial trajectory, error))`.
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.0);
+    /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(3)).execute();
+    /// assert!(out.into_result().is_err());
+    /// ```
+    #[allow(clippy::result_large_err)] // the partial trajectory is the point
+    pub fn into_result(self) -> Result<Trajectory, (Trajectory, StepError)> {
+        match self.error {
+            None => Ok(self.trajectory),
+            Some(e) => Err((self.trajectory, e)),
+        }
+    }
+}
+
+impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// A run from `z0` until `stop`; configure it with
+    /// [`Run::stride`], [`Run::observe`], … and start it with
+    /// [`Run::execute`].
+    ///
+    /// A RATTLE run steps with SHAKE and applies Π only to the states it
+    /// stores or observes: since Π ∘ S_hᵏ = Π ∘ R_hᵏ (the paper's equation
+    /// after Proposition 4.2; see [`rattle`](crate::rattle)) these are the
+    /// RATTLE states, at a fraction of the cost.
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.01);
+    /// let mut energies = Vec::new();
+    /// let out = integ
+    ///     .run(State::from_slices(&[0.0, -1.0], &[1.0, 0.0]), Stop::Time(2.0))
+    ///     .stride(50)
+    ///     .observe(|_step, _t, z| energies.push(0.5 * z.p.norm_squared() + z.q[1]))
+    ///     .execute();
+    /// assert!(out.error.is_none());
+    /// assert_eq!(energies.len(), 5);
+    /// assert!(energies.iter().all(|e| (e - energies[0]).abs() < 1e-4));
+    /// ```
+    pub fn run(&mut self, z0: State, stop: Stop) -> Run<'_, S, B, fn(u64, f64, &State)> {
+        Run {
+            integ: self,
+            z0,
+            stop,
+            stride: 1,
+            store: true,
+            t0: 0.0,
+            observer: |_, _, _| {},
+            on_step: None,
+        }
+    }
+
+    /// [`run`](Self::run) with default settings and `on_step` called after
+    /// every step (see [`Run::on_step`]): the hook a progress indicator
+    /// uses. `ControlFlow::Break(())` ends the run early, without error.
+    ///
+    /// ```
+    /// use std::ops::ControlFlow;
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let mut done = 0.0;
+    /// let out = integ.run_observed(
+    ///     State::from_slices(&[0.0, -1.0], &[0.5, 0.0]),
+    ///     Stop::Steps(20),
+    ///     &mut |e| {
+    ///         done = e.step as f64 / e.steps as f64;
+    ///         ControlFlow::Continue(())
+    ///     },
+    /// );
+    /// assert!(out.error.is_none() && done == 1.0);
+    /// ```
+    pub fn run_observed(
+        &mut self,
+        z0: State,
+        stop: Stop,
+        on_step: &mut impl FnMut(&StepEvent) -> ControlFlow<()>,
+    ) -> RunOutcome {
+        self.run(z0, stop).on_step(on_step).execute()
+    }
+}
+
+/// A configured run; see [`Integrator::run`].
+///
+/// ```
+/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+/// let out = integ
+///     .run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(10))
+///     .stride(5)
+///     .start_time(1.0)
+///     .execute();
+/// assert_eq!(out.trajectory.times(), vec![1.0, 1.5, 2.0]);
+/// ```
+#[must_use = "a run does nothing until `execute` is called"]
+pub struct Run<'a, S: ConstrainedSystem, B: BaseMap, F> {
+    integ: &'a mut Integrator<S, B>,
+    z0: State,
+    stop: Stop,
+    stride: u64,
+    store: bool,
+    t0: f64,
+    observer: F,
+    on_step: Option<&'a mut StepObserver<'a>>,
+}
+
+impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S, B, F> {
+    /// Store (and observe) every `k`-th state, plus the first and the last
+    /// (default 1; 0 is an [`StepError::InvalidInput`]).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(7)).stride(3).execute();
+    /// assert_eq!(out.trajectory.steps(), vec![0, 3, 6, 7]);
+    /// ```
+    pub fn stride(mut self, k: u64) -> Self {
+        self.stride = k;
+        self
+    }
+
+    /// The time of the initial state (default 0).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.5);
+    /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Time(3.0)).start_time(2.0).execute();
+    /// assert_eq!(out.trajectory.times(), vec![2.0, 2.5, 3.0]);
+    /// ```
+    pub fn start_time(mut self, t0: f64) -> Self {
+        self.t0 = t0;
+        self
+    }
+
+    /// Whether to keep the states in the returned [`Trajectory`] (default
+    /// true); with `false` only the observer sees them.
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let mut n = 0;
+    /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(5))
+    ///     .store(false).observe(|_, _, _| n += 1).execute();
+    /// assert!(out.trajectory.is_empty());
+    /// assert_eq!(n, 6);
+    /// ```
+    pub fn store(mut self, store: bool) -> Self {
+        self.store = store;
+        self
+    }
+
+    /// Call `observer(step, t, state)` at every stored state (same points as
+    /// the stride; the state is projected onto M^H for RATTLE).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let mut times = Vec::new();
+    /// let _ = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(2))
+    ///     .observe(|_, t, _| times.push(t)).execute();
+    /// assert_eq!(times, vec![0.0, 0.1, 0.2]);
+    /// ```
+    pub fn observe<G: FnMut(u64, f64, &State)>(self, observer: G) -> Run<'a, S, B, G> {
+        Run {
+            integ: self.integ,
+            z0: self.z0,
+            stop: self.stop,
+            stride: self.stride,
+            store: self.store,
+            t0: self.t0,
+            observer,
+            on_step: self.on_step,
+        }
+    }
+
+    /// Call `f` after every step with its [`StepEvent`] (step index, number
+    /// of steps, time, [`StepInfo`](crate::StepInfo)); `ControlFlow::Break(())` ends the run
+    /// there, with that state stored as the last one and no error. This is
+    /// the hook for progress reporting (every step, not only the stored
+    /// ones; keep `f` cheap).
+    ///
+    /// ```
+    /// use std::ops::ControlFlow;
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let mut seen = 0;
+    /// let mut until_4 = |e: &shake_runtime::StepEvent| {
+    ///     seen += 1;
+    ///     if e.step == 4 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+    /// };
+    /// let out = integ
+    ///     .run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(10))
+    ///     .stride(3)
+    ///     .on_step(&mut until_4)
+    ///     .execute();
+    /// assert!(out.error.is_none());
+    /// assert_eq!(out.trajectory.steps(), vec![0, 3, 4]);
+    /// assert_eq!(seen, 4);
+    /// ```
+    pub fn on_step(mut self, f: &'a mut StepObserver<'a>) -> Self {
+        self.on_step = Some(f);
+        self
+    }
+
+    /// Runs, and returns everything computed, with the error that stopped
+    /// the run early if any. On an error the last good state is stored (and
+    /// observed) even when it is not on the stride.
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(3)).execute();
+    /// assert!(out.error.is_none());
+    /// ```
+    pub fn execute(self) -> RunOutcome {
+        let Run {
+            integ,
+            z0,
+            stop,
+            stride,
+            store,
+            t0,
+            mut observer,
+            mut on_step,
+        } = self;
+        let mut traj = Trajectory::default();
+        let fail = |traj: Trajectory, e: StepError| RunOutcome {
+            trajectory: traj,
+            error: Some(e),
+        };
+        if let Err(e) = integ.check_h().and_then(|_| integ.check_dims(&z0)) {
+            return fail(traj, e);
+        }
+        if stride == 0 {
+            return fail(
+                traj,
+                StepError::InvalidInput {
+                    what: "stride must be at least 1",
+                    value: 0.0,
+                },
+            );
+        }
+        let h = integ.h;
+        let n = match stop {
+            Stop::Steps(n) => n,
+            Stop::Time(t_end) => {
+                let x = (t_end - t0) / h;
+                if !(x >= 0.0) || !x.is_finite() {
+                    return fail(
+                        traj,
+                        StepError::InvalidInput {
+                            what: "stop time must lie in the direction of h from the start time",
+                            value: t_end,
+                        },
+                    );
+                }
+                // Beyond 2^53 steps neither the step count nor the times
+                // t0 + k h are exact any more (and the run would not end).
+                if x > 9007199254740992.0 {
+                    return fail(
+                        traj,
+                        StepError::InvalidInput {
+                            what: "stop time needs more than 2^53 steps of size h",
+                            value: x,
+                        },
+                    );
+                }
+                if (x - x.round()).abs() <= 1e-9 * x.max(1.0) {
+                    x.round() as u64
+                } else {
+                    x.ceil() as u64
+                }
+            }
+        };
+        // Exactly the states the run will store: 0, s, 2s, …, and the last
+        // (a failing run may add its last good state: the buffer grows).
+        let capacity = if store {
+            // (reserved up to 256 MB; a longer run grows the buffer)
+            let budget = (1usize << 28) / (16 * integ.system.dof().max(1));
+            usize::try_from(n / stride + 1 + u64::from(n % stride != 0))
+                .unwrap_or(usize::MAX)
+                .min(budget)
+        } else {
+            0
+        };
+        traj = Trajectory::new(integ.system.dof(), t0, h, stride, capacity);
+        if integ.diagnostics {
+            traj.set_constraints(integ.system.constraint_count());
+            traj.reserve_multipliers(capacity);
+        }
+        let mut q: Vec<f64> = z0.q.as_slice().to_vec();
+        let mut p: Vec<f64> = z0.p.as_slice().to_vec();
+        let mut prev_q = q.clone();
+        let mut prev_p = p.clone();
+        let mut scratch = z0;
+        // SHAKE's difference quotients take their scale from the first state
+        // they meet: this run's, not whatever an earlier run on this
+        // integrator started from (an ensemble reuses one integrator per
+        // thread; a member's result must not depend on its neighbours).
+        integ.ws.lambda_scale = 0.0;
+        if let Err(e) = integ.begin(&q, &p, 0, t0) {
+            return fail(traj, e);
+        }
+        integ.carrying = true;
+        let per_step = integ.method == Method::Rattle && integ.guard.options.project_every_step;
+        let mut acc = Accumulator::default();
+        // The initial state: projected for RATTLE, as given for SHAKE.
+        if per_step {
+            if let Err(e) = project_hidden(
+                &integ.system,
+                &mut q,
+                &mut p,
+                &mut integ.ws,
+                integ.guard.newton(),
+            ) {
+                return fail(traj, e.at(0, t0));
+            }
+        }
+        if let Err(e) = integ.record(
+            &q,
+            &p,
+            per_step,
+            0,
+            t0,
+            &mut acc,
+            &mut traj,
+            store,
+            &mut observer,
+            &mut scratch,
+        ) {
+            return fail(traj, e);
+        }
+        let mut last_recorded = 0;
+        for k in 1..=n {
+            let t_prev = t0 + (k - 1) as f64 * h;
+            prev_q.copy_from_slice(&q);
+            prev_p.copy_from_slice(&p);
+            let info = match integ.advance(&mut q, &mut p, per_step, k, t_prev) {
+                Ok(info) => {
+                    acc.add(&info);
+                    if integ.diagnostics && last_recorded == k - 1 {
+                        integ.fill_leaving_lambda(&mut traj, per_step);
+                    }
+                    info
+                }
+                Err(e) => {
+                    if last_recorded != k - 1 {
+                        // The last good state; if even its projection fails, the
+                        // step error is the one to report.
+                        let _ = integ.record(
+                            &prev_q,
+                            &prev_p,
+                            per_step,
+                            k - 1,
+                            t_prev,
+                            &mut acc,
+                            &mut traj,
+                            store,
+                            &mut observer,
+                            &mut scratch,
+                        );
+                    }
+                    return fail(traj, e);
+                }
+            };
+            let t = t0 + k as f64 * h;
+            let on_stride = k % stride == 0 || k == n;
+            if on_stride {
+                if let Err(e) = integ.record(
+                    &q,
+                    &p,
+                    per_step,
+                    k,
+                    t,
+                    &mut acc,
+                    &mut traj,
+                    store,
+                    &mut observer,
+                    &mut scratch,
+                ) {
+                    return fail(traj, e);
+                }
+                last_recorded = k;
+            }
+            if let Some(f) = on_step.as_mut() {
+                let event = StepEvent {
+                    step: k,
+                    steps: n,
+                    t,
+                    info,
+                };
+                if f(&event).is_break() {
+                    // Stopped by the observer: the trajectory ends at the
+                    // state it saw.
+                    if !on_stride {
+                        if let Err(e) = integ.record(
+                            &q,
+                            &p,
+                            per_step,
+                            k,
+                            t,
+                            &mut acc,
+                            &mut traj,
+                            store,
+                            &mut observer,
+                            &mut scratch,
+                        ) {
+                            return fail(traj, e);
+                        }
+                    }
+                    break;
+                }
+            }
+        }
+        RunOutcome {
+            trajectory: traj,
+            error: None,
+        }
+    }
+}

@@ -1,0 +1,124 @@
+//! Storing one state of a run: its projection onto M^H when the run
+//! projects lazily (Π ∘ S_hᵏ = Π ∘ R_hᵏ, see [`rattle`](crate::rattle)),
+//! its diagnostics record, the observer call and the trajectory push.
+
+use crate::base_map::BaseMap;
+use crate::diagnostics::{Accumulator, DiagnosticRecord};
+use crate::error::StepError;
+use crate::integrator::Integrator;
+use crate::linalg::norm_inf;
+use crate::rattle::project_hidden;
+use crate::state::State;
+use crate::step::Method;
+use crate::system::ConstrainedSystem;
+use crate::trajectory::Trajectory;
+
+impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// With diagnostics, after the step leaving the last recorded state:
+    /// writes that step's λ (of its first substep) into the record. A
+    /// RATTLE run that projects only the states it records stepped from
+    /// the SHAKE state z⁻, so its λ also carries the projection's σ (same
+    /// fibre, same point: the parameters add); σ is taken off so that the
+    /// record's λ is RATTLE's, from the state on M^H.
+    pub(super) fn fill_leaving_lambda(&mut self, traj: &mut Trajectory, per_step: bool) {
+        let m = self.system.constraint_count();
+        let lead = if self.composition.stages() == 1 {
+            &self.ws.lambda
+        } else {
+            &self.lead_lambda
+        };
+        let subtract = self.method == Method::Rattle && !per_step;
+        if let Some((lambda, sigma)) = traj.last_multipliers_mut() {
+            for j in 0..m {
+                lambda[j] = lead[j] - if subtract { sigma[j] } else { 0.0 };
+            }
+        }
+    }
+
+    /// Stores (and shows to the observer) the state (q, p) at step k.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn record<F: FnMut(u64, f64, &State)>(
+        &mut self,
+        q: &[f64],
+        p: &[f64],
+        projected: bool,
+        k: u64,
+        t: f64,
+        acc: &mut Accumulator,
+        traj: &mut Trajectory,
+        store: bool,
+        observer: &mut F,
+        scratch: &mut State,
+    ) -> Result<(), StepError> {
+        scratch.q.as_mut_slice().copy_from_slice(q);
+        scratch.p.as_mut_slice().copy_from_slice(p);
+        let mut rattle_iterations = 0;
+        if self.method == Method::Rattle && !projected && self.n_fresh && self.fast_paths {
+            // The classical path: N at this q is factorised and checked.
+            crate::classical::project(
+                &self.system,
+                scratch.q.as_slice(),
+                scratch.p.as_mut_slice(),
+                &mut self.ws,
+            );
+            rattle_iterations = 1;
+        } else if self.method == Method::Rattle && !projected {
+            let pr = project_hidden(
+                &self.system,
+                scratch.q.as_mut_slice(),
+                scratch.p.as_mut_slice(),
+                &mut self.ws,
+                self.guard.newton(),
+            )
+            .map_err(|e| e.at(k, t))?;
+            rattle_iterations = pr.iterations;
+            // The stored state is the projection of the SHAKE state z⁻ of
+            // this step: it must be the nearby crossing of the fibre with
+            // M^H, on the component the run is on.
+            self.guard.after_lazy_projection(
+                &self.system,
+                scratch.q.as_slice(),
+                scratch.p.as_slice(),
+                &mut self.ws,
+                &pr,
+                self.h,
+                k,
+                t,
+            )?;
+        }
+        if self.diagnostics {
+            let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());
+            let (mut constraint, mut hidden) = (0.0, 0.0);
+            if self.system.constraint_count() > 0 {
+                self.system.constraints(sq, sp, &mut self.ws.g);
+                self.system.hidden_constraints(sq, sp, &mut self.ws.hidden);
+                constraint = norm_inf(&self.ws.g);
+                hidden = norm_inf(&self.ws.hidden);
+            }
+            traj.diagnostics.push(DiagnosticRecord {
+                step: k,
+                t,
+                energy: self.system.hamiltonian(sq, sp),
+                constraint,
+                hidden_constraint: hidden,
+                max_shake_iterations: acc.shake,
+                max_base_iterations: acc.base,
+                rattle_iterations,
+                max_lambda: acc.lambda,
+                max_condition: acc.condition,
+            });
+            // σ: the projection that gave this state, done just now or
+            // (projected) by the last substep; λ is known only once the
+            // step leaving the state is taken (`execute` fills it in).
+            traj.push_multipliers(
+                (self.method == Method::Rattle).then_some(self.ws.sigma.as_slice()),
+            );
+            *acc = Accumulator::default();
+        }
+        observer(k, t, scratch);
+        if store {
+            traj.push(k, scratch.q.as_slice(), scratch.p.as_slice());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,259 @@
+//! SHAKE's buffers and the structure it precomputes once per system: the
+//! band of its Jacobian (predicted from the declared pattern of g_z and the
+//! Hessian's structure) and the band of N.
+
+use crate::base_map::BaseMapWorkspace;
+use crate::fibre::FibreFlow;
+use crate::linalg::Band;
+use crate::system::ConstrainedSystem;
+
+/// All buffers of a SHAKE/RATTLE step, allocated once.
+///
+/// Buffers that receive a system's output are written only by the system
+/// (they are zeroed here, once), as the contract in `system` requires.
+#[derive(Clone, Debug)]
+pub(crate) struct Workspace {
+    pub(crate) d: usize,
+    pub(crate) m: usize,
+    pub(crate) base: BaseMapWorkspace,
+    pub(crate) fibre: FibreFlow,
+    // States.
+    pub(crate) z0: Vec<f64>,
+    pub(crate) y: Vec<f64>,
+    pub(crate) z1: Vec<f64>,
+    pub(crate) tv: Vec<f64>,
+    /// The step's increment Δ = z1⁻ − z0 (and the base map's part of it).
+    pub(crate) dz: Vec<f64>,
+    pub(crate) db: Vec<f64>,
+    // Multipliers.
+    pub(crate) lambda: Vec<f64>,
+    pub(crate) lambda_first: Vec<f64>,
+    pub(crate) delta: Vec<f64>,
+    pub(crate) sigma: Vec<f64>,
+    // System outputs.
+    pub(crate) g: Vec<f64>,
+    pub(crate) g_z_y: Vec<f64>,
+    pub(crate) g_z_1: Vec<f64>,
+    pub(crate) hidden: Vec<f64>,
+    pub(crate) n_mat: Vec<f64>,
+    // Our matrices.
+    pub(crate) jac: Vec<f64>,
+    pub(crate) piv: Vec<usize>,
+    pub(crate) s1: Vec<f64>,
+    pub(crate) s2: Vec<f64>,
+    // Projection onto M (initial data).
+    pub(crate) gram: Vec<f64>,
+    // SHAKE's structured Jacobian.
+    /// The predicted band of SHAKE's Jacobian (full for small m).
+    pub(crate) jac_band: Band,
+    /// The structural band of N (full for small m, or when it does not pay).
+    pub(crate) n_band: Band,
+    /// Columns evaluated together: j ≡ c (mod groups).
+    pub(crate) groups: usize,
+    /// The rows (i, k) of the macro's `JACOBIAN_PATTERN`, for sparse
+    /// products with g_z.
+    pub(crate) pattern: Vec<(usize, usize)>,
+    pub(crate) piv_j: Vec<usize>,
+    /// The band `jac` was factorised with.
+    pub(crate) jac_factored: Band,
+    pub(crate) lambda_probe: Vec<f64>,
+    pub(crate) g_probe: Vec<f64>,
+    pub(crate) y_probe: Vec<f64>,
+    pub(crate) dz_probe: Vec<f64>,
+    pub(crate) z1_probe: Vec<f64>,
+    pub(crate) jv: Vec<f64>,
+    /// The scale of λ for difference quotients (adapted to the system on
+    /// first use: the fibre flow should move z by about √ε_mach ‖z‖).
+    pub(crate) lambda_scale: f64,
+    // The classical path (see `classical`).
+    /// The entries (i, k) of `JACOBIAN_PATTERN` with k < d (∂g_i/∂q_k).
+    pub(crate) cl_pattern: Vec<(usize, usize)>,
+    /// The column group (i mod groups) of each entry of `cl_pattern`.
+    pub(crate) cl_group: Vec<usize>,
+    /// −a h ∇V(q0), the first kick.
+    pub(crate) cl_kick: Vec<f64>,
+    /// The momentum increment before the last kick.
+    pub(crate) cl_u: Vec<f64>,
+    /// Scratch vector and `grad_p` output (written only by the system).
+    pub(crate) cl_v: Vec<f64>,
+    pub(crate) cl_w: Vec<f64>,
+    /// `grad_q` output (written only by the system).
+    pub(crate) cl_hq: Vec<f64>,
+    /// The round-off level of each g_i at the step's start.
+    pub(crate) cl_floor: Vec<f64>,
+    /// The column of N⁻¹ that the last condition estimate ended on (its
+    /// next start; `usize::MAX` for none).
+    pub(crate) cond_column: usize,
+}
+
+impl Workspace {
+    pub(crate) fn new<S: ConstrainedSystem>(sys: &S) -> Self {
+        let d = sys.dof();
+        let m = sys.constraint_count();
+        let n = 2 * d;
+        let jac_band = predicted_band(sys);
+        let groups = if jac_band == Band::full(m) {
+            m
+        } else {
+            jac_band.lower + jac_band.upper + 1
+        };
+        Workspace {
+            d,
+            m,
+            base: BaseMapWorkspace::new(d),
+            fibre: FibreFlow::new(sys),
+            z0: vec![0.0; n],
+            y: vec![0.0; n],
+            z1: vec![0.0; n],
+            tv: vec![0.0; n],
+            dz: vec![0.0; n],
+            db: vec![0.0; n],
+            lambda: vec![0.0; m],
+            lambda_first: vec![0.0; m],
+            delta: vec![0.0; m],
+            sigma: vec![0.0; m],
+            g: vec![0.0; m],
+            g_z_y: vec![0.0; m * n],
+            g_z_1: vec![0.0; m * n],
+            hidden: vec![0.0; m],
+            n_mat: vec![0.0; m * m],
+            jac: vec![0.0; m * m],
+            // Two spare slots: `lu_factor` records a band there (linalg).
+            piv: vec![0; m + 2],
+            s1: vec![0.0; m.max(1)],
+            s2: vec![0.0; m.max(1)],
+            gram: vec![0.0; m * m],
+            jac_band,
+            n_band: structural_band_of_n(sys),
+            groups,
+            pattern: sys
+                .jacobian_pattern()
+                .iter()
+                .copied()
+                .filter(|&(i, k)| i < m && k < n)
+                .collect(),
+            piv_j: vec![0; m.max(1)],
+            jac_factored: jac_band,
+            lambda_probe: vec![0.0; m],
+            g_probe: vec![0.0; m],
+            y_probe: vec![0.0; n],
+            dz_probe: vec![0.0; n],
+            z1_probe: vec![0.0; n],
+            jv: vec![0.0; m],
+            lambda_scale: 0.0,
+            cl_pattern: sys
+                .jacobian_pattern()
+                .iter()
+                .copied()
+                .filter(|&(i, k)| i < m && k < d)
+                .collect(),
+            cl_group: sys
+                .jacobian_pattern()
+                .iter()
+                .filter(|&&(i, k)| i < m && k < d)
+                .map(|&(i, _)| i % groups)
+                .collect(),
+            cl_kick: vec![0.0; d],
+            cl_u: vec![0.0; d],
+            cl_v: vec![0.0; d],
+            cl_w: vec![0.0; d],
+            cl_hq: vec![0.0; d],
+            cl_floor: vec![0.0; m],
+            cond_column: usize::MAX,
+        }
+    }
+}
+
+/// A value no system computes: entries of a buffer still holding it after a
+/// call were not written (finite, so that `+=` still changes it).
+const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
+
+/// The band of SHAKE's Jacobian predicted from the structure of the system
+/// (module docs): column j reaches the constraints that read a variable of
+/// X_{g_j} or of J H_zz X_{g_j}. The pattern of H_zz is the set of entries
+/// `hessian` writes (the contract of `system`: exactly the structurally
+/// nonzero ones). Small systems get the full band.
+/// The band of N = {{H,g_i},g_j} that the system writes at all: a system
+/// writes only structurally nonzero entries (the contract of `system`), so
+/// an entry still holding a sentinel after one evaluation is zero at every
+/// point. Full when the band does not pay.
+fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
+    let (d, m) = (sys.dof(), sys.constraint_count());
+    let full = Band::full(m);
+    if m < 12 {
+        return full;
+    }
+    let mut n_mat = vec![UNWRITTEN; m * m];
+    let point = vec![0.5; d];
+    sys.nondegeneracy_matrix(&point, &point, &mut n_mat);
+    for v in n_mat.iter_mut() {
+        *v = if v.to_bits() == UNWRITTEN.to_bits() {
+            0.0
+        } else {
+            1.0
+        };
+    }
+    let band = Band::of(&n_mat, m);
+    if band.pays(m) {
+        band
+    } else {
+        full
+    }
+}
+
+fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
+    let (d, m) = (sys.dof(), sys.constraint_count());
+    let n = 2 * d;
+    let full = Band::full(m);
+    if !full.pays(m) && m < 12 {
+        return full;
+    }
+    let mut vars_of = vec![Vec::new(); m];
+    let mut rows_of = vec![Vec::new(); n];
+    for &(i, k) in sys.jacobian_pattern() {
+        if i < m && k < n {
+            vars_of[i].push(k);
+            rows_of[k].push(i);
+        }
+    }
+    let mut hz = vec![UNWRITTEN; n * n];
+    let point = vec![0.5; d];
+    sys.hessian(&point, &point, &mut hz);
+    let h_rows: Vec<Vec<usize>> = (0..n)
+        .map(|c| {
+            (0..n)
+                .filter(|&r| hz[r + c * n].to_bits() != UNWRITTEN.to_bits())
+                .collect()
+        })
+        .collect();
+    let swap = |k: usize| if k < d { k + d } else { k - d };
+    let mut band = Band { lower: 0, upper: 0 };
+    let mut seen = vec![usize::MAX; n];
+    let mut reach = Vec::new();
+    for j in 0..m {
+        reach.clear();
+        for &k in &vars_of[j] {
+            let v = swap(k);
+            for w in std::iter::once(v).chain(h_rows[v].iter().map(|&r| swap(r))) {
+                if seen[w] != j {
+                    seen[w] = j;
+                    reach.push(w);
+                }
+            }
+        }
+        for &w in &reach {
+            for &i in &rows_of[w] {
+                if i > j {
+                    band.lower = band.lower.max(i - j);
+                } else {
+                    band.upper = band.upper.max(j - i);
+                }
+            }
+        }
+    }
+    if band.pays(m) {
+        band
+    } else {
+        full
+    }
+}

@@ -1,0 +1,99 @@
+//! Step maps: SHAKE S_h (Definition 1.1), RATTLE R_h = Π ∘ S_h
+//! (Definition 1.2) and their symmetric compositions (Section 4), each a
+//! map z ↦ z′ over a base map φ_h.
+//!
+//! - `shake`: one SHAKE substep, on the general path (the
+//!   Newton iteration on λ of `crate::shake`) or the classical one
+//!   (`crate::classical`), followed by Π for RATTLE;
+//! - this file: the composition of substeps γ_k h that makes one step.
+//!
+//! A step map only computes; every check on its result is the
+//! [`guard`](crate::guard)'s, and the run around it (stride, storage,
+//! observers) is the [`run`](crate::run) driver's.
+
+mod shake;
+
+use crate::base_map::BaseMap;
+use crate::error::StepError;
+use crate::integrator::Integrator;
+use crate::system::ConstrainedSystem;
+
+/// Which map a step is: SHAKE S_h (onto M) or RATTLE R_h = Π ∘ S_h (onto M^H).
+///
+/// ```
+/// use shake_runtime::{Integrator, ImplicitMidpoint, Method, examples::Pendulum};
+/// let integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).shake();
+/// assert_eq!(integ.method(), Method::Shake);
+/// ```
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Method {
+    /// Geometric SHAKE (Definition 1.1): states stay on M, the hidden
+    /// constraint residual is O(h).
+    Shake,
+    /// Geometric RATTLE (Definition 1.2): states on M^H.
+    #[default]
+    Rattle,
+}
+
+/// What one step did.
+///
+/// ```
+/// use shake_runtime::{Integrator, ImplicitMidpoint, State, examples::Pendulum};
+/// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1);
+/// let mut z = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
+/// let info = integ.step_in_place(&mut z).unwrap();
+/// assert!(info.shake_iterations >= 2 && info.lambda < 0.1);
+/// ```
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct StepInfo {
+    /// Newton iterations on λ (SHAKE).
+    pub shake_iterations: usize,
+    /// Newton iterations of the base map's stage equations (all of them).
+    pub base_iterations: usize,
+    /// Newton iterations of the projection onto M^H (0 unless projected).
+    pub rattle_iterations: usize,
+    /// ‖λ‖∞, the fibre displacement of SHAKE.
+    pub lambda: f64,
+    /// The condition number of N at the new state (relative to the start,
+    /// see [`Options::max_condition`](crate::Options::max_condition)).
+    pub condition: f64,
+    /// det N at the new state.
+    pub det_n: f64,
+}
+
+impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// One step from (q, p), in place: the substeps γ_k h of the
+    /// composition (one substep of size h without one), each a SHAKE step,
+    /// projected onto M^H unless it is the last one and `project` is false,
+    /// and each checked. `step` is the index of the new state, `t` the time
+    /// at the start of the step. Iteration counts are summed over the
+    /// substeps, ‖λ‖ and the condition of N are the largest.
+    pub(crate) fn advance(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        project: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<StepInfo, StepError> {
+        let gammas = self.composition.coefficients();
+        if gammas.len() == 1 {
+            return self.substep(q, p, self.h, project, step, t);
+        }
+        let last = gammas.len() - 1;
+        let mut total = StepInfo::default();
+        for (k, &gamma) in gammas.iter().enumerate() {
+            let info = self.substep(q, p, gamma * self.h, project || k < last, step, t)?;
+            if k == 0 && self.diagnostics {
+                self.lead_lambda.copy_from_slice(&self.ws.lambda);
+            }
+            total.shake_iterations += info.shake_iterations;
+            total.base_iterations += info.base_iterations;
+            total.rattle_iterations += info.rattle_iterations;
+            total.lambda = total.lambda.max(info.lambda);
+            total.condition = total.condition.max(info.condition);
+            total.det_n = info.det_n;
+        }
+        Ok(total)
+    }
+}
