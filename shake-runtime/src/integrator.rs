@@ -25,6 +25,7 @@ use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
 use crate::shake::Workspace;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
+use crate::validate;
 
 pub use crate::guard::Options;
 pub use crate::run::{Run, RunOutcome, StepEvent, StepObserver, Stop};
@@ -354,13 +355,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         &self.ws.lambda
     }
     pub(crate) fn check_h(&self) -> Result<(), StepError> {
-        if self.h == 0.0 || !self.h.is_finite() {
-            return Err(StepError::InvalidInput {
-                what: "step size h must be finite and nonzero",
-                value: self.h,
-            });
-        }
-        Ok(())
+        validate::step_size(self.h)?;
+        validate::options(&self.guard.options)
     }
 
     pub(crate) fn check_dims(&self, z: &State) -> Result<(), StepError> {
@@ -481,14 +477,20 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 t: 0.0,
             });
         }
-        let mut out = z.clone();
-        project_hidden(
+        validate::options(&self.guard.options)?;
+        let tol = self.guard.options.constraint_tolerance;
+        validate::on_constraint(
             &self.system,
-            out.q.as_mut_slice(),
-            out.p.as_mut_slice(),
-            &mut self.ws,
-            self.guard.newton(),
+            z.q.as_slice(),
+            z.p.as_slice(),
+            &mut self.ws.g,
+            tol,
         )?;
+        let mut out = z.clone();
+        let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
+        project_hidden(&self.system, q, p, &mut self.ws, self.guard.newton())?;
+        validate::finite("projected state", q, p)?;
+        validate::on_constraint(&self.system, q, p, &mut self.ws.g, tol)?;
         Ok(out)
     }
 
@@ -515,6 +517,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 t: 0.0,
             });
         }
+        validate::options(&self.guard.options)?;
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
         let opts = *self.guard.newton();
@@ -531,6 +534,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
+        validate::finite("projected state", q, p)?;
         if self.system.constraint_count() > 0 {
             self.system.constraints(q, p, &mut self.ws.g);
             let r = norm_inf(&self.ws.g);
