@@ -489,8 +489,16 @@ fn judge<S: ConstrainedSystem + Clone, B: BaseMap>(
             single(r, case.rattle)
         }
         Op::Project => {
-            let r = integ.project(&z0);
-            single(r, true)
+            // Π moves along fibres, on which g is constant: its input need
+            // only be on M to the tolerance, and so is its result.
+            let tol = case.options.constraint_tolerance;
+            match integ.project(&z0) {
+                Err(e) => Verdict::Typed(kind(&e)),
+                Ok(z) => match off_manifold(&sys, &z, true, tol) {
+                    None => Verdict::Ok,
+                    Some(why) => Verdict::Silent(format!("Ok but {why}")),
+                },
+            }
         }
         Op::ProjectToHidden => {
             let r = integ.project_to_hidden(&z0);

@@ -57,11 +57,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let mut good = from;
         for j in from + 1..k {
             let t = t0 + j as f64 * h;
-            if self
-                .advance(q, p, false, j, t0 + (j - 1) as f64 * h)
-                .is_err()
-            {
-                break;
+            // Round-off can make a replayed step fail where the original
+            // passed: then that step is the failing one.
+            if let Err(e) = self.advance(q, p, false, j, t0 + (j - 1) as f64 * h) {
+                q.copy_from_slice(&good_q);
+                p.copy_from_slice(&good_p);
+                return (good, Some(e.at(j, t)));
             }
             let shown = &mut |_: u64, _: f64, _: &State| {};
             let r = self.record(
@@ -141,6 +142,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 t,
             )?;
         }
+        // NaN or ∞ (a parameter that overflows the projection) is an error
+        // at this step, never a stored state.
+        crate::validate::finite(
+            "projected state",
+            scratch.q.as_slice(),
+            scratch.p.as_slice(),
+        )
+        .map_err(|e| e.at(k, t))?;
         if self.diagnostics {
             let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());
             let (mut constraint, mut hidden) = (0.0, 0.0);
