@@ -15,7 +15,7 @@
 //!   lies in 1 ..= [`MAX_ITERATIONS`] so that no call can spin, whatever the
 //!   stagnation threshold;
 //! - states: the dimension and finiteness checks live with the integrator
-//!   (`check_dims`); [`finite`] is the check of a step's *result*: NaN or ∞
+//!   (`check_dims`); `finite` is the check of a step's *result*: NaN or ∞
 //!   anywhere in it is an error at that step, never an `Ok`.
 //!
 //! ```
