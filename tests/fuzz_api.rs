@@ -401,22 +401,11 @@ fn kind(e: &StepError) -> &'static str {
         StepError::NonFinite { .. } => "NonFinite",
         StepError::NewtonNotConverged { .. } => "NewtonNotConverged",
         StepError::NondegeneracyLost { .. } => "NondegeneracyLost",
+        StepError::SingularShakeJacobian { .. } => "SingularShakeJacobian",
+        StepError::SingularNondegeneracyMatrix { .. } => "SingularNondegeneracyMatrix",
         StepError::ComponentJump { .. } => "ComponentJump",
         StepError::FibreJump { .. } => "FibreJump",
         StepError::NotOnConstraint { .. } => "NotOnConstraint",
-    }
-}
-
-/// The time an error reports, where it reports one.
-fn error_time(e: &StepError) -> Option<f64> {
-    match *e {
-        StepError::InvalidInput { .. } => None,
-        StepError::NonFinite { t, .. }
-        | StepError::NewtonNotConverged { t, .. }
-        | StepError::NondegeneracyLost { t, .. }
-        | StepError::ComponentJump { t, .. }
-        | StepError::FibreJump { t, .. }
-        | StepError::NotOnConstraint { t, .. } => Some(t),
     }
 }
 
@@ -562,7 +551,7 @@ fn judge<S: ConstrainedSystem + Clone, B: BaseMap>(
                 }
                 Some(e) => {
                     let k = e.step();
-                    if let Some(te) = error_time(e) {
+                    if let Some(te) = e.time() {
                         let t = t0 + k as f64 * h;
                         if !(te == t || (te.is_nan() && t.is_nan())) {
                             return Verdict::Silent(format!(

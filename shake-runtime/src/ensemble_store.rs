@@ -503,7 +503,7 @@ mod tests {
         let text = std::fs::read_to_string(dir.join("manifest.txt")).unwrap();
         let line = text.lines().nth(1).unwrap();
         assert!(line.starts_with("4 failed 0 "), "{line}");
-        assert!(line.contains("step=0") && line.contains("non-finite initial state"));
+        assert!(line.contains("step=0") && line.contains("non-finite value in the initial state"));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

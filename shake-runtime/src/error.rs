@@ -49,7 +49,7 @@ impl fmt::Display for Stage {
 pub enum SolveError {
     /// The stopping rule (see [`newton`](crate::newton)) was not met within
     /// the iteration budget.
-    #[error("no convergence in {iterations} iterations (residual {residual:.3e})")]
+    #[error("no convergence in {iterations} iterations (residual {residual:.1e})")]
     NotConverged {
         /// Iterations done.
         iterations: usize,
@@ -70,11 +70,36 @@ pub enum SolveError {
     },
 }
 
+/// A number for a message: six significant digits at most, trailing zeros
+/// dropped, so that t = 0.30000000000000004 reads `0.3`.
+///
+/// ```
+/// use shake_runtime::error::human;
+/// assert_eq!(human(0.30000000000000004), "0.3");
+/// assert_eq!(human(12.5), "12.5");
+/// assert_eq!(human(1e-9), "1.0e-9");
+/// ```
+pub fn human(x: f64) -> String {
+    if x == 0.0 || (1e-4..1e6).contains(&x.abs()) {
+        let digits = (5 - x.abs().log10().floor().max(-4.0) as i32).clamp(0, 9) as usize;
+        let s = format!("{x:.digits$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        format!("{x:.1e}")
+    }
+}
+
 /// A step (or a run, or the projection of initial data) failed.
 ///
-/// `step` counts the steps from the start of the run (the failing step is
-/// the one from `step - 1` to `step`; 0 for initial data), `t` is the time
-/// at the start of the failing step.
+/// `step` is the index of the state the failing step was computing (step k
+/// goes from state k − 1 to state k; 0 for the initial data) and `t` the
+/// time of that state, t0 + k·h: a run that fails at step k stored its
+/// states up to k − 1 (see [`RunOutcome`](crate::RunOutcome)). A single
+/// [`Integrator::step`](crate::Integrator::step) is step 1 from t0 = 0.
 ///
 /// ```
 /// use shake_runtime::{Integrator, StormerVerlet, StepError, examples::Pendulum};
@@ -86,7 +111,8 @@ pub enum SolveError {
 pub enum StepError {
     /// A parameter of the call is unusable: h = 0 or not finite, a stop time
     /// of the wrong sign, a stride of 0, a state of the wrong dimension.
-    #[error("invalid input: {what} (value {value})")]
+    /// Found before any step: it has no step or time.
+    #[error("invalid input: {what} (value {})", human(*.value))]
     InvalidInput {
         /// What is wrong.
         what: &'static str,
@@ -94,17 +120,20 @@ pub enum StepError {
         value: f64,
     },
     /// A state (the input or one computed) has a NaN or infinite entry.
-    #[error("non-finite {what} at step {step}, t = {t}")]
+    #[error("non-finite value in the {what} at step {step}, t = {}: entry {entry} of z = (q, p)", human(*.t))]
     NonFinite {
-        /// Which state: "initial state" or "state".
+        /// Which state: the initial state, or the state after SHAKE or Π.
         what: &'static str,
         /// Step index.
         step: u64,
         /// Time.
         t: f64,
+        /// The first non-finite entry of z = (q, p) (entries d.. are p).
+        entry: usize,
     },
-    /// A Newton iteration did not converge.
-    #[error("Newton did not converge in {stage} at step {step}, t = {t}: {source}")]
+    /// A Newton iteration did not converge (its iteration count and last
+    /// residual are in `source`).
+    #[error("Newton did not converge in {stage} at step {step}, t = {}: {source}", human(*.t))]
     NewtonNotConverged {
         /// Which equation.
         stage: Stage,
@@ -116,13 +145,37 @@ pub enum StepError {
         #[source]
         source: SolveError,
     },
-    /// N_ij = {{H,g_i},g_j} is singular or ill-conditioned: the
-    /// nondegeneracy assumption (the paper's Assumption 1.1) fails here, and
-    /// SHAKE/RATTLE are not well defined. `condition` is the condition
-    /// number of N relative to its size at the start of the run (see
-    /// [`Options::max_condition`](crate::Options::max_condition)); ∞ when N
-    /// (or SHAKE's Newton matrix) is exactly singular.
-    #[error("nondegeneracy lost in {stage} at step {step}, t = {t}: condition of N = {condition:.3e} (limit {limit:.1e})")]
+    /// SHAKE's Newton matrix ∂/∂λ g(φ_h(exp(Σ λ_i X_{g_i}) z0)) is exactly
+    /// singular: the step cannot be solved from here (h too large for the
+    /// fibre to cross M again nearby). Not the nondegeneracy of N, which is
+    /// a property of the state: see [`StepError::NondegeneracyLost`].
+    #[error("SHAKE's Jacobian is singular at step {step}, t = {} (Newton iteration {iterations})", human(*.t))]
+    SingularShakeJacobian {
+        /// Step index.
+        step: u64,
+        /// Time.
+        t: f64,
+        /// Newton iterations done.
+        iterations: usize,
+    },
+    /// N_ij = {{H,g_i},g_j} is exactly singular at the state: the
+    /// nondegeneracy assumption (the paper's Assumption 1.1) fails there and
+    /// Π onto M^H is not defined.
+    #[error("N = {{{{H,g_i}},g_j}} is singular in {stage} at step {step}, t = {}: the nondegeneracy assumption fails", human(*.t))]
+    SingularNondegeneracyMatrix {
+        /// Where it was detected.
+        stage: Stage,
+        /// Step index.
+        step: u64,
+        /// Time.
+        t: f64,
+    },
+    /// N_ij = {{H,g_i},g_j} is ill-conditioned: the nondegeneracy
+    /// assumption (the paper's Assumption 1.1) is about to fail, and
+    /// SHAKE/RATTLE are not reliable. `condition` is the condition number of
+    /// N relative to its size at the start of the run (see
+    /// [`Options::max_condition`](crate::Options::max_condition)).
+    #[error("nondegeneracy lost in {stage} at step {step}, t = {}: condition of N = {condition:.1e} > limit {limit:.1e}", human(*.t))]
     NondegeneracyLost {
         /// Where it was detected.
         stage: Stage,
@@ -138,7 +191,7 @@ pub enum StepError {
     /// det N changed sign between two steps: the trajectory crossed (or
     /// jumped over) a point where N is singular, onto another component of
     /// M^H (the paper's Section 5.4.2, case iii).
-    #[error("jumped to another component of M^H at step {step}, t = {t}: det N changed sign from {det_before:.3e} to {det_after:.3e}")]
+    #[error("jumped to another component of M^H at step {step}, t = {}: det N changed sign from {det_before:.1e} to {det_after:.1e}", human(*.t))]
     ComponentJump {
         /// Step index.
         step: u64,
@@ -154,7 +207,7 @@ pub enum StepError {
     /// is not the nearby one of order h but another intersection of the
     /// fibre with the modified hidden constraint set), or the projection's σ
     /// (Π landed on another crossing of the fibre with M^H).
-    #[error("fibre jump in {stage} at step {step}, t = {t}: the fibre displacement is {lambda:.3e} but its linear prediction was {predicted:.3e}: Newton left the nearby point of M and M^H, which signals a fold or another component of M^H (Section 5.4.2)")]
+    #[error("fibre jump in {stage} at step {step}, t = {}: the fibre displacement is {lambda:.1e} but its linear prediction was {predicted:.1e}: Newton left the nearby point of M and M^H, which signals a fold or another component of M^H (Section 5.4.2)", human(*.t))]
     FibreJump {
         /// Where: SHAKE's λ or the projection's σ.
         stage: Stage,
@@ -168,10 +221,9 @@ pub enum StepError {
         predicted: f64,
     },
     /// The state handed to SHAKE/RATTLE is not on M = {g = 0} (or, for
-    /// initial data, could not be brought onto it).
-    #[error(
-        "initial data not on M: |g| = {residual:.3e} > {tolerance:.1e} (step {step}, t = {t})"
-    )]
+    /// initial data, could not be brought onto it: then `cause` says why
+    /// the projection onto M stopped).
+    #[error("not on M at step {step}, t = {}: |g| = {residual:.1e} > {tolerance:.1e}, largest for the constraint `{constraint}`", human(*.t))]
     NotOnConstraint {
         /// Step index.
         step: u64,
@@ -181,6 +233,11 @@ pub enum StepError {
         residual: f64,
         /// The tolerance it exceeds.
         tolerance: f64,
+        /// The declared name of the constraint with the largest |g_i|.
+        constraint: String,
+        /// Why the projection of initial data onto M failed, if it did.
+        #[source]
+        cause: Option<SolveError>,
     },
 }
 
@@ -197,6 +254,8 @@ impl StepError {
             StepError::InvalidInput { .. } => 0,
             StepError::NonFinite { step, .. }
             | StepError::NewtonNotConverged { step, .. }
+            | StepError::SingularShakeJacobian { step, .. }
+            | StepError::SingularNondegeneracyMatrix { step, .. }
             | StepError::NondegeneracyLost { step, .. }
             | StepError::ComponentJump { step, .. }
             | StepError::FibreJump { step, .. }
@@ -204,13 +263,38 @@ impl StepError {
         }
     }
 
-    /// Sets the step index and time (the low-level functions report 0; the
-    /// driver knows better).
+    /// The time t0 + k·h of the state the failing step k was computing
+    /// (`None` for input errors, found before any step).
+    ///
+    /// ```
+    /// use shake_runtime::StepError;
+    /// let e = StepError::ComponentJump { step: 7, t: 0.7, det_before: 1.0, det_after: -1.0 };
+    /// assert_eq!(e.time(), Some(0.7));
+    /// ```
+    pub fn time(&self) -> Option<f64> {
+        match *self {
+            StepError::InvalidInput { .. } => None,
+            StepError::NonFinite { t, .. }
+            | StepError::NewtonNotConverged { t, .. }
+            | StepError::SingularShakeJacobian { t, .. }
+            | StepError::SingularNondegeneracyMatrix { t, .. }
+            | StepError::NondegeneracyLost { t, .. }
+            | StepError::ComponentJump { t, .. }
+            | StepError::FibreJump { t, .. }
+            | StepError::NotOnConstraint { t, .. } => Some(t),
+        }
+    }
+
+    /// Sets the step index and time: the kernels that solve one equation
+    /// (`shake`, `rattle`, the base maps) do not know where in a run they
+    /// are, and every caller of them passes the step's own k and t0 + k·h.
     pub(crate) fn at(mut self, step_index: u64, time: f64) -> Self {
         match &mut self {
             StepError::InvalidInput { .. } => {}
             StepError::NonFinite { step, t, .. }
             | StepError::NewtonNotConverged { step, t, .. }
+            | StepError::SingularShakeJacobian { step, t, .. }
+            | StepError::SingularNondegeneracyMatrix { step, t, .. }
             | StepError::NondegeneracyLost { step, t, .. }
             | StepError::ComponentJump { step, t, .. }
             | StepError::FibreJump { step, t, .. }
@@ -222,20 +306,29 @@ impl StepError {
         self
     }
 
-    /// Turns a Newton failure in `stage` into a step error (step/time filled
-    /// in later by [`StepError::at`]).
+    /// Turns a Newton failure in `stage` into a step error, one variant per
+    /// cause: a singular matrix in SHAKE is [`StepError::SingularShakeJacobian`],
+    /// in the projection (whose matrix is −N) it is
+    /// [`StepError::SingularNondegeneracyMatrix`]; anything else keeps the
+    /// solver's own error as its source. Step and time are set by the caller
+    /// with [`StepError::at`].
     pub(crate) fn from_solve(stage: Stage, e: SolveError) -> Self {
-        match e {
-            SolveError::Singular { .. } if matches!(stage, Stage::Shake | Stage::Rattle) => {
-                StepError::NondegeneracyLost {
+        match (stage, e) {
+            (Stage::Shake, SolveError::Singular { iterations }) => {
+                StepError::SingularShakeJacobian {
+                    step: 0,
+                    t: 0.0,
+                    iterations,
+                }
+            }
+            (Stage::Rattle, SolveError::Singular { .. }) => {
+                StepError::SingularNondegeneracyMatrix {
                     stage,
                     step: 0,
                     t: 0.0,
-                    condition: f64::INFINITY,
-                    limit: f64::INFINITY,
                 }
             }
-            e => StepError::NewtonNotConverged {
+            (stage, e) => StepError::NewtonNotConverged {
                 stage,
                 step: 0,
                 t: 0.0,

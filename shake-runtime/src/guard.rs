@@ -22,7 +22,6 @@
 //! at the start of the run and det N at the previous state.
 
 use crate::error::{SolveError, Stage, StepError};
-use crate::linalg::norm_inf;
 use crate::newton::NewtonOptions;
 use crate::rattle::{check_nondegeneracy, NondegeneracyCheck, ProjectionReport};
 use crate::shake::{ShakeReport, Workspace};
@@ -139,26 +138,19 @@ impl Guard {
             return Ok(());
         }
         sys.constraints(q, p, &mut ws.g);
-        let r = norm_inf(&ws.g);
-        if !(r <= self.options.constraint_tolerance) {
+        let (residual, i) = largest(&ws.g);
+        if !(residual <= self.options.constraint_tolerance) {
             return Err(StepError::NotOnConstraint {
                 step,
                 t,
-                residual: r,
+                residual,
                 tolerance: self.options.constraint_tolerance,
+                constraint: sys.constraint_name(i).to_string(),
+                cause: None,
             });
         }
         let nd = check_nondegeneracy(sys, q, p, ws);
-        let cond = nd.condition(0.0);
-        if !(cond <= self.options.max_condition) {
-            return Err(StepError::NondegeneracyLost {
-                stage: Stage::Shake,
-                step,
-                t,
-                condition: cond,
-                limit: self.options.max_condition,
-            });
-        }
+        self.nondegenerate(&nd, 0.0, Stage::Shake, step, t)?;
         self.reference_norm = nd.norm;
         self.det_prev = nd.det;
         Ok(())
@@ -172,10 +164,14 @@ impl Guard {
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
-        if q.iter().chain(p).all(|x| x.is_finite()) {
-            Ok(())
-        } else {
-            Err(StepError::NonFinite { what, step, t })
+        match q.iter().chain(p).position(|x| !x.is_finite()) {
+            None => Ok(()),
+            Some(entry) => Err(StepError::NonFinite {
+                what,
+                step,
+                t,
+                entry,
+            }),
         }
     }
 
@@ -243,16 +239,8 @@ impl Guard {
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
-        let opts = &self.options;
-        // NaN-propagating maximum.
-        let residual = ws.g.iter().fold(0.0f64, |a, x| {
-            if x.is_nan() || x.abs() > a {
-                x.abs()
-            } else {
-                a
-            }
-        });
-        if !(residual <= opts.constraint_tolerance) {
+        let (residual, _) = largest(&ws.g);
+        if !(residual <= self.options.constraint_tolerance) {
             return Err(StepError::NewtonNotConverged {
                 stage: Stage::Shake,
                 step,
@@ -264,21 +252,13 @@ impl Guard {
             });
         }
         let nd = check_nondegeneracy(sys, q, p, ws);
-        info.condition = nd.condition(self.reference_norm);
+        let stage = if projected {
+            Stage::Rattle
+        } else {
+            Stage::Shake
+        };
+        info.condition = self.nondegenerate(&nd, self.reference_norm, stage, step, t)?;
         info.det_n = nd.det;
-        if !(info.condition <= opts.max_condition) {
-            return Err(StepError::NondegeneracyLost {
-                stage: if projected {
-                    Stage::Rattle
-                } else {
-                    Stage::Shake
-                },
-                step,
-                t,
-                condition: info.condition,
-                limit: opts.max_condition,
-            });
-        }
         self.component(&nd, step, t)?;
         self.det_prev = nd.det;
         self.last_norm = nd.norm;
@@ -316,6 +296,33 @@ impl Guard {
         Ok(())
     }
 
+    /// N is invertible (else [`StepError::SingularNondegeneracyMatrix`]) and
+    /// its condition relative to `reference` within the limit (else
+    /// [`StepError::NondegeneracyLost`]); returns the condition.
+    fn nondegenerate(
+        &self,
+        nd: &NondegeneracyCheck,
+        reference: f64,
+        stage: Stage,
+        step: u64,
+        t: f64,
+    ) -> Result<f64, StepError> {
+        if nd.inverse_norm.is_infinite() {
+            return Err(StepError::SingularNondegeneracyMatrix { stage, step, t });
+        }
+        let condition = nd.condition(reference);
+        if !(condition <= self.options.max_condition) {
+            return Err(StepError::NondegeneracyLost {
+                stage,
+                step,
+                t,
+                condition,
+                limit: self.options.max_condition,
+            });
+        }
+        Ok(condition)
+    }
+
     /// det N kept the sign it had at the previous state.
     fn component(&self, nd: &NondegeneracyCheck, step: u64, t: f64) -> Result<(), StepError> {
         if self.options.check_component
@@ -336,4 +343,19 @@ impl Guard {
     pub(crate) fn newton(&self) -> &NewtonOptions {
         &self.options.newton
     }
+}
+
+/// ‖v‖∞ and where it is attained, NaN-propagating (a NaN entry is the
+/// largest).
+pub(crate) fn largest(v: &[f64]) -> (f64, usize) {
+    let mut best = (0.0f64, 0);
+    for (i, x) in v.iter().enumerate() {
+        if x.is_nan() {
+            return (f64::NAN, i);
+        }
+        if x.abs() > best.0 {
+            best = (x.abs(), i);
+        }
+    }
+    best
 }

@@ -93,17 +93,10 @@ pub(crate) fn options(o: &Options) -> Result<(), StepError> {
     Ok(())
 }
 
-/// NaN or ∞ anywhere in a computed state is an error at that step.
+/// NaN or ∞ anywhere in a computed state is an error at that step (the
+/// caller stamps step and time).
 pub(crate) fn finite(what: &'static str, q: &[f64], p: &[f64]) -> Result<(), StepError> {
-    if q.iter().chain(p).all(|x| x.is_finite()) {
-        Ok(())
-    } else {
-        Err(StepError::NonFinite {
-            what,
-            step: 0,
-            t: 0.0,
-        })
-    }
+    crate::guard::Guard::finite(q, p, what, 0, 0.0)
 }
 
 /// A state handed to Π (or produced by it) must lie on M to `tolerance`;
@@ -116,14 +109,22 @@ pub(crate) fn on_constraint<S: ConstrainedSystem>(
     tolerance: f64,
 ) -> Result<(), StepError> {
     system.constraints(q, p, g);
-    let residual = g.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    // A NaN residual fails too.
+    // The largest |g_i| and its i; a NaN entry counts as the largest.
+    let (residual, i) = g.iter().enumerate().fold((0.0f64, 0), |(r, j), (i, x)| {
+        if x.abs() > r || x.is_nan() && !r.is_nan() {
+            (x.abs(), i)
+        } else {
+            (r, j)
+        }
+    });
     if !(residual <= tolerance) {
         return Err(StepError::NotOnConstraint {
             step: 0,
             t: 0.0,
             residual,
             tolerance,
+            constraint: system.constraint_name(i).to_string(),
+            cause: None,
         });
     }
     Ok(())

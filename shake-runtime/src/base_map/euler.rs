@@ -19,9 +19,19 @@ use crate::SolveError;
 pub struct SymplecticEuler;
 
 impl BaseMap for SymplecticEuler {
+    type Workspace = BaseMapWorkspace;
+
     const NAME: &'static str = "symplectic Euler";
     const SYMMETRIC: bool = false;
     const ORDER: u32 = 1;
+
+    fn workspace(&self, d: usize) -> BaseMapWorkspace {
+        BaseMapWorkspace::new(d)
+    }
+
+    fn reset_warm_start(&self, ws: &mut BaseMapWorkspace) {
+        ws.reset_warm_start();
+    }
 
     fn explicit_for<S: Hamiltonian>(&self, sys: &S) -> bool {
         sys.separable()

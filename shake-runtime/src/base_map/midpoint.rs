@@ -19,9 +19,19 @@ use crate::SolveError;
 pub struct ImplicitMidpoint;
 
 impl BaseMap for ImplicitMidpoint {
+    type Workspace = BaseMapWorkspace;
+
     const NAME: &'static str = "implicit midpoint";
     const SYMMETRIC: bool = true;
     const ORDER: u32 = 2;
+
+    fn workspace(&self, d: usize) -> BaseMapWorkspace {
+        BaseMapWorkspace::new(d)
+    }
+
+    fn reset_warm_start(&self, ws: &mut BaseMapWorkspace) {
+        ws.reset_warm_start();
+    }
 
     fn apply<S: Hamiltonian>(
         &self,

@@ -39,25 +39,49 @@ use crate::SolveError;
 
 /// A symplectic map φ_h of R^{2d} approximating exp(h X_H), with its
 /// tangent map. Implemented by [`ImplicitMidpoint`], [`StormerVerlet`] and
-/// [`SymplecticEuler`].
+/// [`SymplecticEuler`], and by anyone: a map written outside this crate
+/// brings its own buffers as [`BaseMap::Workspace`] (the crate's
+/// `examples/custom_base_map.rs` composes Störmer–Verlet into Yoshida's
+/// fourth-order map and runs RATTLE over it).
 ///
 /// ```
-/// use shake_runtime::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, NewtonOptions};
+/// use shake_runtime::{BaseMap, ImplicitMidpoint, NewtonOptions};
 /// use shake_runtime::examples::HarmonicOscillator;
 /// // One midpoint step of q'' = −q conserves the quadratic energy exactly.
 /// let sys = HarmonicOscillator;
-/// let mut ws = BaseMapWorkspace::new(1);
+/// let mut ws = ImplicitMidpoint.workspace(1);
 /// let (mut q, mut p) = ([1.0], [0.0]);
 /// ImplicitMidpoint.apply(&sys, 0.1, &mut q, &mut p, &mut ws, &NewtonOptions::default()).unwrap();
 /// assert!((q[0] * q[0] + p[0] * p[0] - 1.0).abs() < 1e-15);
 /// ```
 pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
+    /// The buffers of one application and of its tangent map (stage values,
+    /// Newton matrices), allocated once by [`workspace`](BaseMap::workspace)
+    /// so that a step allocates nothing.
+    type Workspace: Clone + std::fmt::Debug + Send + Sync;
+
     /// A short name for reports ("midpoint", ...).
     const NAME: &'static str;
     /// φ_{−h} = φ_h⁻¹: RATTLE on top of it is symmetric (Section 4).
     const SYMMETRIC: bool;
     /// The order of φ_h as an approximation of exp(h X_H).
     const ORDER: u32;
+
+    /// Buffers for a system with `d` degrees of freedom.
+    ///
+    /// ```
+    /// use shake_runtime::{BaseMap, StormerVerlet};
+    /// assert_eq!(StormerVerlet.workspace(3).dof(), 3);
+    /// ```
+    fn workspace(&self, d: usize) -> Self::Workspace;
+
+    /// Forget the stage values of the last application, so that the next
+    /// one starts its Newton iteration from an explicit predictor (SHAKE
+    /// calls it at the start of each step). The provided version does
+    /// nothing (a map without warm starts).
+    fn reset_warm_start(&self, ws: &mut Self::Workspace) {
+        let _ = ws;
+    }
 
     /// Whether φ_h is explicit for this H (no stage equations to solve):
     /// Störmer–Verlet and symplectic Euler when H is separable. SHAKE then
@@ -100,7 +124,7 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
         h: f64,
         q: &mut [f64],
         p: &mut [f64],
-        ws: &mut BaseMapWorkspace,
+        ws: &mut Self::Workspace,
         opts: &NewtonOptions,
     ) -> Result<usize, SolveError>;
 
@@ -111,12 +135,12 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
         &self,
         sys: &S,
         h: f64,
-        ws: &mut BaseMapWorkspace,
+        ws: &mut Self::Workspace,
     ) -> Result<(), SolveError>;
 
     /// v ← Dφ_h(y) v for v = (δq, δp) of length 2d, y the input of the last
     /// [`apply`](BaseMap::apply), after [`prepare_tangent`](BaseMap::prepare_tangent).
-    fn apply_tangent(&self, h: f64, ws: &mut BaseMapWorkspace, v: &mut [f64]);
+    fn apply_tangent(&self, h: f64, ws: &mut Self::Workspace, v: &mut [f64]);
 
     /// The increment (δq, δp) = φ_h(z) − z, without changing z, computed as
     /// a small quantity in its own right (not as a difference of two
@@ -130,9 +154,9 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// override it with increment forms of their stage equations.
     ///
     /// ```
-    /// use shake_runtime::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, NewtonOptions};
+    /// use shake_runtime::{BaseMap, ImplicitMidpoint, NewtonOptions};
     /// use shake_runtime::examples::HarmonicOscillator;
-    /// let mut ws = BaseMapWorkspace::new(1);
+    /// let mut ws = ImplicitMidpoint.workspace(1);
     /// let (mut dq, mut dp) = ([0.0], [0.0]);
     /// ImplicitMidpoint
     ///     .increment(&HarmonicOscillator, 1e-3, &[1.0], &[0.0], &mut dq, &mut dp, &mut ws, &NewtonOptions::default())
@@ -149,7 +173,7 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
         p: &[f64],
         dq: &mut [f64],
         dp: &mut [f64],
-        ws: &mut BaseMapWorkspace,
+        ws: &mut Self::Workspace,
         opts: &NewtonOptions,
     ) -> Result<usize, SolveError> {
         dq.copy_from_slice(q);

@@ -20,9 +20,19 @@ use crate::SolveError;
 pub struct StormerVerlet;
 
 impl BaseMap for StormerVerlet {
+    type Workspace = BaseMapWorkspace;
+
     const NAME: &'static str = "Störmer–Verlet";
     const SYMMETRIC: bool = true;
     const ORDER: u32 = 2;
+
+    fn workspace(&self, d: usize) -> BaseMapWorkspace {
+        BaseMapWorkspace::new(d)
+    }
+
+    fn reset_warm_start(&self, ws: &mut BaseMapWorkspace) {
+        ws.reset_warm_start();
+    }
 
     fn explicit_for<S: Hamiltonian>(&self, sys: &S) -> bool {
         sys.separable()

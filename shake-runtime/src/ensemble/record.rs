@@ -6,9 +6,11 @@ use crate::diagnostics::DiagnosticRecord;
 use crate::error::{SolveError, Stage, StepError};
 use crate::integrator::{RunOutcome, Trajectory};
 
-/// The first word of every packed record ("SHAKE", version 2: with the
-/// multipliers λ, σ of each diagnostic record).
-const RECORD_TAG: u64 = 0x5348_414b_4502;
+/// The first word of every packed record ("SHAKE", version 3: with the
+/// multipliers λ, σ of each diagnostic record, and the error variants of
+/// version 3: entry of a non-finite value, singular SHAKE Jacobian, singular
+/// N, the constraint and cause of a state off M).
+const RECORD_TAG: u64 = 0x5348_414b_4503;
 /// Words of one packed [`DiagnosticRecord`].
 const DIAGNOSTIC_WORDS: usize = 10;
 
@@ -122,7 +124,7 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
 /// use shake_runtime::ensemble::{pack_outcome, unpack_outcome, RecordError};
 /// let failed = RunOutcome {
 ///     trajectory: Trajectory::default(),
-///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0 }),
+///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0, entry: 0 }),
 /// };
 /// let mut words = Vec::new();
 /// pack_outcome(3, &failed, &mut words);
@@ -229,8 +231,13 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             w.extend([1, b(value)]);
             pack_str(what, w);
         }
-        StepError::NonFinite { what, step, t } => {
-            w.extend([2, step, b(t)]);
+        StepError::NonFinite {
+            what,
+            step,
+            t,
+            entry,
+        } => {
+            w.extend([2, step, b(t), entry as u64]);
             pack_str(what, w);
         }
         StepError::NewtonNotConverged {
@@ -239,23 +246,16 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             t,
             source,
         } => {
-            let (kind, iterations, residual) = match source {
-                SolveError::NotConverged {
-                    iterations,
-                    residual,
-                } => (0, iterations, residual),
-                SolveError::Singular { iterations } => (1, iterations, 0.0),
-                SolveError::NonFinite { iterations } => (2, iterations, 0.0),
-            };
-            w.extend([
-                3,
-                stage_code(stage),
-                step,
-                b(t),
-                kind,
-                iterations as u64,
-                b(residual),
-            ]);
+            w.extend([3, stage_code(stage), step, b(t)]);
+            pack_solve(Some(source), w);
+        }
+        StepError::SingularShakeJacobian {
+            step,
+            t,
+            iterations,
+        } => w.extend([8, step, b(t), iterations as u64]),
+        StepError::SingularNondegeneracyMatrix { stage, step, t } => {
+            w.extend([9, stage_code(stage), step, b(t)])
         }
         StepError::NondegeneracyLost {
             stage,
@@ -282,8 +282,47 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             t,
             residual,
             tolerance,
-        } => w.extend([7, step, b(t), b(residual), b(tolerance)]),
+            ref constraint,
+            cause,
+        } => {
+            w.extend([7, step, b(t), b(residual), b(tolerance)]);
+            pack_str(constraint, w);
+            pack_solve(cause, w);
+        }
     }
+}
+
+/// A solver error as (kind, iterations, residual); kind 3 is none.
+fn pack_solve(e: Option<SolveError>, w: &mut Vec<u64>) {
+    let (kind, iterations, residual) = match e {
+        Some(SolveError::NotConverged {
+            iterations,
+            residual,
+        }) => (0, iterations, residual),
+        Some(SolveError::Singular { iterations }) => (1, iterations, 0.0),
+        Some(SolveError::NonFinite { iterations }) => (2, iterations, 0.0),
+        None => (3, 0, 0.0),
+    };
+    w.extend([kind, iterations as u64, residual.to_bits()]);
+}
+
+fn unpack_solve(r: &mut Reader) -> Result<Option<SolveError>, RecordError> {
+    let (kind, iterations, residual) = (r.word()?, r.index("iterations")?, r.float()?);
+    Ok(Some(match kind {
+        0 => SolveError::NotConverged {
+            iterations,
+            residual,
+        },
+        1 => SolveError::Singular { iterations },
+        2 => SolveError::NonFinite { iterations },
+        3 => return Ok(None),
+        k => {
+            return Err(RecordError::Corrupted {
+                what: "solve error",
+                value: k,
+            })
+        }
+    }))
 }
 
 fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
@@ -297,30 +336,20 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
             }
         }
         2 => {
-            let (step, t) = (r.word()?, r.float()?);
+            let (step, t, entry) = (r.word()?, r.float()?, r.index("entry")?);
             StepError::NonFinite {
                 what: r.string()?,
                 step,
                 t,
+                entry,
             }
         }
         3 => {
             let (stage, step, t) = (r.stage()?, r.word()?, r.float()?);
-            let (kind, iterations, residual) = (r.word()?, r.index("iterations")?, r.float()?);
-            let source = match kind {
-                0 => SolveError::NotConverged {
-                    iterations,
-                    residual,
-                },
-                1 => SolveError::Singular { iterations },
-                2 => SolveError::NonFinite { iterations },
-                k => {
-                    return Err(RecordError::Corrupted {
-                        what: "solve error",
-                        value: k,
-                    })
-                }
-            };
+            let source = unpack_solve(r)?.ok_or(RecordError::Corrupted {
+                what: "solve error",
+                value: 3,
+            })?;
             StepError::NewtonNotConverged {
                 stage,
                 step,
@@ -328,6 +357,16 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
                 source,
             }
         }
+        8 => StepError::SingularShakeJacobian {
+            step: r.word()?,
+            t: r.float()?,
+            iterations: r.index("iterations")?,
+        },
+        9 => StepError::SingularNondegeneracyMatrix {
+            stage: r.stage()?,
+            step: r.word()?,
+            t: r.float()?,
+        },
         4 => StepError::NondegeneracyLost {
             stage: r.stage()?,
             step: r.word()?,
@@ -353,6 +392,8 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
             t: r.float()?,
             residual: r.float()?,
             tolerance: r.float()?,
+            constraint: r.string()?.to_string(),
+            cause: unpack_solve(r)?,
         },
         k => {
             return Err(RecordError::Corrupted {

@@ -53,6 +53,7 @@ fn every_error_round_trips() {
             what: "a message that is longer than eight bytes",
             step: 3,
             t: f64::NAN,
+            entry: 5,
         },
         StepError::NewtonNotConverged {
             stage: Stage::BaseMap,
@@ -100,6 +101,26 @@ fn every_error_round_trips() {
             t: 0.0,
             residual: 0.1,
             tolerance: 1e-10,
+            constraint: "rod".to_string(),
+            cause: None,
+        },
+        StepError::NotOnConstraint {
+            step: 0,
+            t: 0.0,
+            residual: 0.3,
+            tolerance: 1e-8,
+            constraint: "link 3".to_string(),
+            cause: Some(SolveError::Singular { iterations: 4 }),
+        },
+        StepError::SingularShakeJacobian {
+            step: 9,
+            t: 0.45,
+            iterations: 3,
+        },
+        StepError::SingularNondegeneracyMatrix {
+            stage: Stage::Rattle,
+            step: 2,
+            t: 0.1,
         },
     ];
     for e in errors {

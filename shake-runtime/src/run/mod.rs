@@ -407,7 +407,8 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         let lazy = integ.method == Method::Rattle && !per_step;
         let (mut rec_q, mut rec_p) = (q.clone(), p.clone());
         for k in 1..=n {
-            let t_prev = t0 + (k - 1) as f64 * h;
+            // Errors of step k carry k and the time it was computing.
+            let t = t0 + k as f64 * h;
             // An error at step k ends the run with the state of step k − 1
             // stored last; for a lazy RATTLE run that state is the last one
             // whose projection exists, and a projection that failed before
@@ -445,7 +446,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             }
             prev_q.copy_from_slice(&q);
             prev_p.copy_from_slice(&p);
-            let info = match integ.advance(&mut q, &mut p, per_step, k, t_prev) {
+            let info = match integ.advance(&mut q, &mut p, per_step, k, t) {
                 Ok(info) => {
                     acc.add(&info);
                     if integ.diagnostics && last_recorded == k - 1 {
@@ -456,7 +457,6 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 // The step attempted was step k, at t0 + k·h (issue 11).
                 Err(e) => end_before!(e.at(k, t0 + k as f64 * h)),
             };
-            let t = t0 + k as f64 * h;
             let on_stride = k % stride == 0 || k == n;
             if on_stride {
                 if let Err(e) = integ.record(

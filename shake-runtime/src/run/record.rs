@@ -55,11 +55,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let (mut acc, mut unused) = (Accumulator::default(), Trajectory::default());
         let (mut good_q, mut good_p) = (q.to_vec(), p.to_vec());
         let mut good = from;
+        // The compensated sum's carry is that of the failed step (NaN, for
+        // a step that overflowed): the replay starts without one.
+        self.carry.fill(0.0);
         for j in from + 1..k {
             let t = t0 + j as f64 * h;
             // Round-off can make a replayed step fail where the original
             // passed: then that step is the failing one.
-            if let Err(e) = self.advance(q, p, false, j, t0 + (j - 1) as f64 * h) {
+            if let Err(e) = self.advance(q, p, false, j, t) {
                 q.copy_from_slice(&good_q);
                 p.copy_from_slice(&good_p);
                 return (good, Some(e.at(j, t)));

@@ -59,7 +59,7 @@ mod workspace;
 
 pub(crate) use workspace::Workspace;
 
-use crate::base_map::{BaseMap, BaseMapWorkspace};
+use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
 use crate::error::{Stage, StepError};
 use crate::fibre::FibreFlow;
@@ -108,24 +108,25 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     q: &mut [f64],
     p: &mut [f64],
     ws: &mut Workspace,
+    base_ws: &mut B::Workspace,
     opts: &NewtonOptions,
     carry: Option<&mut [f64]>,
 ) -> Result<ShakeReport, StepError> {
     let (d, m) = (ws.d, ws.m);
     let mut report = ShakeReport::default();
-    ws.base.reset_warm_start();
+    base.reset_warm_start(base_ws);
     ws.z0[..d].copy_from_slice(q);
     ws.z0[d..].copy_from_slice(p);
     ws.lambda.fill(0.0);
     if m == 0 {
-        report.base_iterations = residual(sys, base, h, ws, opts, false)?;
+        report.base_iterations = residual(sys, base, h, ws, base_ws, opts, false)?;
         add_increment(q, p, &ws.dz, carry);
         return Ok(report);
     }
     let mut mon = Monitor::new(*opts);
     let mut converged = false;
     // r(0): y = z0 (the fibre flow at λ = 0 is the identity).
-    report.base_iterations += residual(sys, base, h, ws, opts, false)?;
+    report.base_iterations += residual(sys, base, h, ws, base_ws, opts, false)?;
     // An explicit base map makes the residual cheap: difference quotients
     // of it beat the tangent map.
     let explicit = base.explicit_for(sys);
@@ -163,7 +164,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
             } else {
                 JacobianMode::Tangent
             };
-            report.base_iterations += jacobian(sys, base, h, ws, opts, mode)?;
+            report.base_iterations += jacobian(sys, base, h, ws, base_ws, opts, mode)?;
             let band = if mode == JacobianMode::TangentDense {
                 Band::full(m)
             } else {
@@ -217,7 +218,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
         }
         prev_step = step;
         // y = F_λ(z0), z1⁻ = φ_h(y), r = g(z1⁻).
-        report.base_iterations += residual(sys, base, h, ws, opts, true)?;
+        report.base_iterations += residual(sys, base, h, ws, base_ws, opts, true)?;
     }
     add_increment(q, p, &ws.dz, carry);
     report.iterations = mon.iterations;
@@ -272,7 +273,7 @@ fn increment<S: ConstrainedSystem, B: BaseMap>(
     flow: bool,
     z0: &[f64],
     fibre: &mut FibreFlow,
-    base_ws: &mut BaseMapWorkspace,
+    base_ws: &mut B::Workspace,
     opts: &NewtonOptions,
     dz: &mut [f64],
     db: &mut [f64],
@@ -310,6 +311,7 @@ fn residual<S: ConstrainedSystem, B: BaseMap>(
     base: &B,
     h: f64,
     ws: &mut Workspace,
+    base_ws: &mut B::Workspace,
     opts: &NewtonOptions,
     flow: bool,
 ) -> Result<usize, StepError> {
@@ -322,7 +324,7 @@ fn residual<S: ConstrainedSystem, B: BaseMap>(
         flow,
         &ws.z0,
         &mut ws.fibre,
-        &mut ws.base,
+        base_ws,
         opts,
         &mut ws.dz,
         &mut ws.db,
@@ -342,6 +344,7 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
     base: &B,
     h: f64,
     ws: &mut Workspace,
+    base_ws: &mut B::Workspace,
     opts: &NewtonOptions,
     mode: JacobianMode,
 ) -> Result<usize, StepError> {
@@ -363,7 +366,7 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
     if mode != JacobianMode::Differences {
         sys.constraint_jacobian(&ws.y[..d], &ws.y[d..], &mut ws.g_z_y);
         sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
-        base.prepare_tangent(sys, h, &mut ws.base)
+        base.prepare_tangent(sys, h, base_ws)
             .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
     } else if ws.lambda_scale == 0.0 {
         ws.lambda_scale = lambda_scale(sys, ws);
@@ -387,7 +390,7 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
                 true,
                 &ws.z0,
                 &mut ws.fibre,
-                &mut ws.base,
+                base_ws,
                 opts,
                 &mut ws.dz_probe,
                 &mut ws.db,
@@ -415,7 +418,7 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
                     }
                 }
             }
-            base.apply_tangent(h, &mut ws.base, &mut ws.tv);
+            base.apply_tangent(h, base_ws, &mut ws.tv);
             ws.jv.fill(0.0);
             for &(i, k) in &ws.pattern {
                 ws.jv[i] += ws.g_z_1[i + k * m] * ws.tv[k];

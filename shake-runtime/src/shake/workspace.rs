@@ -2,7 +2,6 @@
 //! band of its Jacobian (predicted from the declared pattern of g_z and the
 //! Hessian's structure) and the band of N.
 
-use crate::base_map::BaseMapWorkspace;
 use crate::fibre::FibreFlow;
 use crate::linalg::Band;
 use crate::system::ConstrainedSystem;
@@ -15,7 +14,6 @@ use crate::system::ConstrainedSystem;
 pub(crate) struct Workspace {
     pub(crate) d: usize,
     pub(crate) m: usize,
-    pub(crate) base: BaseMapWorkspace,
     pub(crate) fibre: FibreFlow,
     // States.
     pub(crate) z0: Vec<f64>,
@@ -100,7 +98,6 @@ impl Workspace {
         Workspace {
             d,
             m,
-            base: BaseMapWorkspace::new(d),
             fibre: FibreFlow::new(sys),
             z0: vec![0.0; n],
             y: vec![0.0; n],

@@ -66,7 +66,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// composition (one substep of size h without one), each a SHAKE step,
     /// projected onto M^H unless it is the last one and `project` is false,
     /// and each checked. `step` is the index of the new state, `t` the time
-    /// at the start of the step. Iteration counts are summed over the
+    /// t0 + k·h of the state it computes. Iteration counts are summed over the
     /// substeps, ‖λ‖ and the condition of N are the largest.
     pub(crate) fn advance(
         &mut self,

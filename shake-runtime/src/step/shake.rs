@@ -47,6 +47,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             q,
             p,
             &mut self.ws,
+            &mut self.base_ws,
             &newton,
             carry,
         )
