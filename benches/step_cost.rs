@@ -18,16 +18,8 @@
 //!
 //! Nothing here asserts: benchmarks print.
 
-#[path = "support/chain.rs"]
-mod chain;
-#[path = "support/dual.rs"]
-mod dual;
-#[path = "../tests/common/models.rs"]
-mod models;
-#[path = "support/report.rs"]
-mod report;
-#[path = "support/systems.rs"]
-mod systems;
+use shake_testkit::bench::{chain, dual, report, systems};
+use shake_testkit::models;
 
 use chain::{chain_state, HandChain};
 use criterion::{measurement::WallTime, BenchmarkGroup, Criterion};

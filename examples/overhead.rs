@@ -1,5 +1,5 @@
 //! The library's cost per step against a hand-written straight-line RATTLE
-//! (the limit, `benches/support/limit.rs`), in one run:
+//! (the limit, `shake-testkit/src/bench/limit.rs`), in one run:
 //!
 //!     cargo run --release --example overhead
 //!
@@ -24,8 +24,7 @@
 //! trajectory holds (as requested from the allocator) and the growth of the
 //! resident set, per stored state. Nothing asserts.
 
-#[path = "../benches/support/limit.rs"]
-mod limit;
+use shake_testkit::bench::limit;
 
 use limit::{limit_chain_state, LimitChain, LimitPendulum};
 use shake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};

@@ -13,12 +13,7 @@
 //! Times are the best of several repetitions (the machine may be shared);
 //! the tables are printed as markdown. Nothing asserts.
 
-#[path = "../benches/support/chain.rs"]
-mod chain;
-#[path = "../benches/support/dual.rs"]
-mod dual;
-#[path = "../benches/support/systems.rs"]
-mod systems;
+use shake_testkit::bench::{chain, systems};
 
 use chain::{chain_state, HandChain};
 use shake::{

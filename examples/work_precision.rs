@@ -9,17 +9,14 @@
 //! midpoint, Störmer–Verlet, symplectic Euler), and RATTLE composed to
 //! orders 4 and 6 over a symmetric base map. Errors: max-norm distance of
 //! the state at T to the reference solution (order-12 extrapolation of the
-//! index-reduced ODE on M^H, `tests/common/reference.rs`, itself accurate to
+//! index-reduced ODE on M^H, `shake-testkit/src/reference.rs`, itself accurate to
 //! ~1e-13). SHAKE's states lie on M, not on M^H: its raw error is O(h)
 //! along the fibre (RATTLE's is O(h²); Π of a SHAKE state *is* the RATTLE
 //! state), so SHAKE's curves show the cost of not projecting. The run time
 //! is the best of several repetitions of `Run::execute` that observes only
 //! the final state (a RATTLE run then projects once).
 
-#[path = "paper/plot.rs"]
-mod plot;
-#[path = "../tests/common/reference.rs"]
-mod reference;
+use shake_testkit::{plot, reference};
 
 use nalgebra::DVector;
 use plot::{Figure, Mark};

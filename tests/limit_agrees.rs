@@ -1,9 +1,8 @@
-//! The hand-written limit of `examples/overhead.rs` (benches/support/limit.rs)
+//! The hand-written limit of `examples/overhead.rs` (shake-testkit/src/bench/limit.rs)
 //! computes the same RATTLE steps as the library, to round-off: from each
 //! state of a library run, one step of each, compared. Not a timing test.
 
-#[path = "../benches/support/limit.rs"]
-mod limit;
+use shake_testkit::bench::limit;
 
 use limit::{limit_chain_state, LimitChain, LimitPendulum};
 use shake::{Integrator, State, StormerVerlet};

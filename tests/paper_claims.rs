@@ -1,6 +1,6 @@
 //! Claims 1–6 of MISSION.md ("What the paper claims") as tests, on the systems
 //! declared with `constrained_system!` (`shake::models`), checked against the
-//! independent oracles of `tests/common/reference.rs` (plain Rust + num-dual,
+//! independent oracles of `shake-testkit/src/reference.rs` (plain Rust + num-dual,
 //! no shake code). The `paper` example measures the same claims and draws
 //! them; the runtime's own tests check them on hand-written systems.
 //!

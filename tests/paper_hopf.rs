@@ -2,9 +2,9 @@
 //! Section 5.4) as tests.
 //!
 //! They measure what the `paper` scenes `hopf_free` and `hopf_gravity`
-//! measure, with the same bounds and for the same reasons: both include
-//! `examples/paper/scenes/hopf_lab.rs`, which runs shake and compares with
-//! the independent reference (`tests/common/reference.rs`). The runs here are
+//! measure, with the same bounds and for the same reasons: both use
+//! `shake_testkit::hopf_lab`, which runs shake and compares with
+//! the independent reference (`shake_testkit::reference`). The runs here are
 //! shorter than the scene's full runs, so that the tests stay fast in a debug
 //! build; none of the bounds depends on the length of a run except where the
 //! bound says so (steps·ε).
@@ -12,8 +12,7 @@
 mod common;
 
 use common::reference;
-#[path = "../examples/paper/scenes/hopf_lab.rs"]
-mod hopf_lab;
+use shake_testkit::hopf_lab;
 
 use hopf_lab as lab;
 use nalgebra::DVector;

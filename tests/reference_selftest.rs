@@ -1,4 +1,4 @@
-//! Self-tests of the independent oracles in `tests/common/reference.rs`:
+//! Self-tests of the independent oracles in `shake-testkit/src/reference.rs`:
 //! against each other, against closed forms and against known facts, so that
 //! the oracles themselves can be trusted. Every tolerance says where it comes
 //! from: round-off where the quantity is exact, O(h^k) where a method of

@@ -12,11 +12,7 @@
 //! machine, command line), so a table found later can be traced to its run.
 
 mod claims;
-#[path = "../../tests/common/models.rs"]
-mod models;
-mod plot;
-#[path = "../../tests/common/reference.rs"]
-mod reference;
+use shake_testkit::{models, plot, reference};
 mod run_info;
 mod scenes;
 

@@ -24,6 +24,7 @@ use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
 use crate::shake::Workspace;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
+use crate::validate;
 
 pub use crate::guard::Options;
 pub use crate::run::{Run, RunOutcome, StepEvent, StepObserver, Stop};
@@ -368,13 +369,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         &self.ws.lambda
     }
     pub(crate) fn check_h(&self) -> Result<(), StepError> {
-        if self.h == 0.0 || !self.h.is_finite() {
-            return Err(StepError::InvalidInput {
-                what: "step size h must be finite and nonzero",
-                value: self.h,
-            });
-        }
-        Ok(())
+        validate::step_size(self.h)?;
+        validate::options(&self.guard.options)
     }
 
     pub(crate) fn check_dims(&self, z: &State) -> Result<(), StepError> {
@@ -489,14 +485,20 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     pub fn project(&mut self, z: &State) -> Result<State, StepError> {
         self.check_dims(z)?;
         Guard::finite(z.q.as_slice(), z.p.as_slice(), "state", 0, 0.0)?;
-        let mut out = z.clone();
-        project_hidden(
+        validate::options(&self.guard.options)?;
+        let tol = self.guard.options.constraint_tolerance;
+        validate::on_constraint(
             &self.system,
-            out.q.as_mut_slice(),
-            out.p.as_mut_slice(),
-            &mut self.ws,
-            self.guard.newton(),
+            z.q.as_slice(),
+            z.p.as_slice(),
+            &mut self.ws.g,
+            tol,
         )?;
+        let mut out = z.clone();
+        let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
+        project_hidden(&self.system, q, p, &mut self.ws, self.guard.newton())?;
+        validate::finite("projected state", q, p)?;
+        validate::on_constraint(&self.system, q, p, &mut self.ws.g, tol)?;
         Ok(out)
     }
 
@@ -517,6 +519,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     pub fn project_to_hidden(&mut self, z: &State) -> Result<State, StepError> {
         self.check_dims(z)?;
         Guard::finite(z.q.as_slice(), z.p.as_slice(), "initial state", 0, 0.0)?;
+        validate::options(&self.guard.options)?;
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
         let opts = *self.guard.newton();
@@ -530,6 +533,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             return Err(self.off_m(q, p, cause));
         }
         project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
+        validate::finite("projected state", q, p)?;
         if self.system.constraint_count() > 0 {
             self.system.constraints(q, p, &mut self.ws.g);
             if !(largest(&self.ws.g).0 <= self.guard.options.constraint_tolerance) {

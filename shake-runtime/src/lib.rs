@@ -85,6 +85,7 @@ pub mod step;
 pub mod system;
 mod trajectory;
 mod unconstrained;
+pub mod validate;
 
 pub use base_map::{BaseMap, BaseMapWorkspace, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
 pub use composition::Composition;

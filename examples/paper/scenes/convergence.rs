@@ -2,7 +2,7 @@
 //!
 //! Global error at a fixed time against h, for every base map, SHAKE and
 //! RATTLE, on the pendulum and on the harmonic constraint with gravity,
-//! against the independent reference of `tests/common/reference.rs` (an
+//! against the independent reference of `shake-testkit/src/reference.rs` (an
 //! order-12 extrapolation of the index-reduced ODE on M^H, with num-dual
 //! derivatives, run until it stops changing: error ≲ 1e-13).
 //!

@@ -6,7 +6,7 @@
 //! z ↦ e^{−2iσ}z of the Hopf fibration and M^H = {q·p = 0} has two
 //! components, {|q| > |p|} and {|q| < |p|}, separated by the exceptional
 //! fibres |q| = |p| where nondegeneracy fails. Everything is measured against
-//! `tests/common/reference.rs`, which shares no code with shake.
+//! `shake-testkit/src/reference.rs`, which shares no code with shake.
 //!
 //! - **The multiplier** (eq hopf_lambda): λ_paper = |p|²/(|q|² − |p|²). The
 //!   paper writes q' = (1 + λ)p; our convention q' = H_p + g_pᵀλ with
@@ -37,8 +37,7 @@
 
 use std::f64::consts::PI;
 
-#[path = "hopf_lab.rs"]
-pub(super) mod lab;
+pub(super) use shake_testkit::hopf_lab as lab;
 
 use lab::{FreeRun, Z};
 use nalgebra::DVector;

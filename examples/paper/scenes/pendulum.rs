@@ -7,7 +7,7 @@
 //!   RATTLE keeps |{g,H}| at round-off, SHAKE's |{g,H}| is O(h), energy shows
 //!   no drift.
 //! - Claim 2: the classical formulas of Section 5.1.3 (written independently
-//!   in `tests/common/reference.rs`) give the same steps to round-off.
+//!   in `shake-testkit/src/reference.rs`) give the same steps to round-off.
 //! - Claim 3: RATTLE over a symmetric base map is symmetric; SHAKE is
 //!   presymplectic on M and RATTLE symplectic on M^H (Prop. 4.3, Cor. 4.5).
 //! - Claim 4: SHAKE's result does not depend on where on the fibre of z0 it

@@ -295,7 +295,11 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             trajectory: traj,
             error: Some(e),
         };
-        if let Err(e) = integ.check_h().and_then(|_| integ.check_dims(&z0)) {
+        if let Err(e) = integ
+            .check_h()
+            .and_then(|_| integ.check_dims(&z0))
+            .and_then(|_| crate::validate::time("start time must be finite", t0))
+        {
             return fail(traj, e);
         }
         if stride == 0 {
@@ -398,10 +402,48 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             return fail(traj, e);
         }
         let mut last_recorded = 0;
+        // A lazily projecting RATTLE run keeps the SHAKE state of its last
+        // stored step, to replay from it on failure (`replay_lazy`).
+        let lazy = integ.method == Method::Rattle && !per_step;
+        let (mut rec_q, mut rec_p) = (q.clone(), p.clone());
         for k in 1..=n {
-            let t_prev = t0 + (k - 1) as f64 * h;
             // Errors of step k carry k and the time it was computing.
             let t = t0 + k as f64 * h;
+            // An error at step k ends the run with the state of step k − 1
+            // stored last; for a lazy RATTLE run that state is the last one
+            // whose projection exists, and a projection that failed before
+            // step k is the error reported.
+            macro_rules! end_before {
+                ($e:expr) => {{
+                    let mut e = $e;
+                    if last_recorded != k - 1 {
+                        let mut last = k - 1;
+                        if lazy {
+                            let (good, first) =
+                                integ.replay_lazy(&mut rec_q, &mut rec_p, last_recorded, k, t0);
+                            prev_q.copy_from_slice(&rec_q);
+                            prev_p.copy_from_slice(&rec_p);
+                            last = good;
+                            e = first.unwrap_or(e);
+                        }
+                        if last > last_recorded {
+                            let _ = integ.record(
+                                &prev_q,
+                                &prev_p,
+                                per_step,
+                                last,
+                                t0 + last as f64 * h,
+                                &mut acc,
+                                &mut traj,
+                                store,
+                                &mut observer,
+                                &mut scratch,
+                            );
+                        }
+                    }
+                    return fail(traj, e);
+                }};
+            }
             prev_q.copy_from_slice(&q);
             prev_p.copy_from_slice(&p);
             let info = match integ.advance(&mut q, &mut p, per_step, k, t) {
@@ -412,25 +454,8 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                     }
                     info
                 }
-                Err(e) => {
-                    if last_recorded != k - 1 {
-                        // The last good state; if even its projection fails, the
-                        // step error is the one to report.
-                        let _ = integ.record(
-                            &prev_q,
-                            &prev_p,
-                            per_step,
-                            k - 1,
-                            t_prev,
-                            &mut acc,
-                            &mut traj,
-                            store,
-                            &mut observer,
-                            &mut scratch,
-                        );
-                    }
-                    return fail(traj, e);
-                }
+                // The step attempted was step k, at t0 + k·h (issue 11).
+                Err(e) => end_before!(e.at(k, t0 + k as f64 * h)),
             };
             let on_stride = k % stride == 0 || k == n;
             if on_stride {
@@ -446,9 +471,13 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                     &mut observer,
                     &mut scratch,
                 ) {
-                    return fail(traj, e);
+                    // Step k's state could not be stored (its projection
+                    // failed): the trajectory ends before step k.
+                    end_before!(e.at(k, t));
                 }
                 last_recorded = k;
+                rec_q.copy_from_slice(&q);
+                rec_p.copy_from_slice(&p);
             }
             if let Some(f) = on_step.as_mut() {
                 let event = StepEvent {

@@ -35,6 +35,65 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
     }
 
+    /// A lazily projecting RATTLE run failed at step k, and the SHAKE states
+    /// after its last stored one (step `from`, SHAKE state (q, p)) were
+    /// never projected: replays them, projecting each as a stored state
+    /// would be, so that the run can end at the last step whose RATTLE state
+    /// exists. Returns that step (its SHAKE state left in (q, p)) and the
+    /// projection's error where one failed before step k. Runs only on
+    /// failure; the replayed steps equal the original ones to round-off.
+    pub(super) fn replay_lazy(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        from: u64,
+        k: u64,
+        t0: f64,
+    ) -> (u64, Option<StepError>) {
+        let h = self.h;
+        let mut scratch = State::from_slices(q, p);
+        let (mut acc, mut unused) = (Accumulator::default(), Trajectory::default());
+        let (mut good_q, mut good_p) = (q.to_vec(), p.to_vec());
+        let mut good = from;
+        // The compensated sum's carry is that of the failed step (NaN, for
+        // a step that overflowed): the replay starts without one.
+        self.carry.fill(0.0);
+        for j in from + 1..k {
+            let t = t0 + j as f64 * h;
+            // Round-off can make a replayed step fail where the original
+            // passed: then that step is the failing one.
+            if let Err(e) = self.advance(q, p, false, j, t) {
+                q.copy_from_slice(&good_q);
+                p.copy_from_slice(&good_p);
+                return (good, Some(e.at(j, t)));
+            }
+            let shown = &mut |_: u64, _: f64, _: &State| {};
+            let r = self.record(
+                q,
+                p,
+                false,
+                j,
+                t,
+                &mut acc,
+                &mut unused,
+                false,
+                shown,
+                &mut scratch,
+            );
+            if let Err(e) = r {
+                q.copy_from_slice(&good_q);
+                p.copy_from_slice(&good_p);
+                return (good, Some(e.at(j, t)));
+            }
+            good = j;
+            good_q.copy_from_slice(q);
+            good_p.copy_from_slice(p);
+        }
+        q.copy_from_slice(&good_q);
+        p.copy_from_slice(&good_p);
+        (good, None)
+    }
+
     /// Stores (and shows to the observer) the state (q, p) at step k.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn record<F: FnMut(u64, f64, &State)>(
@@ -86,6 +145,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 t,
             )?;
         }
+        // NaN or ∞ (a parameter that overflows the projection) is an error
+        // at this step, never a stored state.
+        crate::validate::finite(
+            "projected state",
+            scratch.q.as_slice(),
+            scratch.p.as_slice(),
+        )
+        .map_err(|e| e.at(k, t))?;
         if self.diagnostics {
             let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());
             let (mut constraint, mut hidden) = (0.0, 0.0);

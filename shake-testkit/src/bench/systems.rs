@@ -1,6 +1,6 @@
 //! The benchmark scenes, each three ways: declared with
 //! `constrained_system!` (the pendulums and Hopf from `shake::models`, the
-//! chains below), written by hand (`tests/common/models.rs` and
+//! chains below), written by hand (`shake_testkit::models` and
 //! `chain.rs`), and written once generically for num-dual (`dual.rs`).
 #![allow(dead_code, clippy::needless_range_loop)]
 

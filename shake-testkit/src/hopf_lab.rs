@@ -1,14 +1,12 @@
 //! The computations behind the two Hopf scenes (the paper's Section 5.4) and
 //! their tests: runs of shake's SHAKE and RATTLE on
 //! `shake::models::{HopfFree, HopfGravity}`, measured against the independent
-//! reference of `tests/common/reference.rs`.
+//! reference of [`crate::reference`].
 //!
 //! Nothing here draws or keeps the claims table: the `paper` scenes
-//! (`hopf_free.rs`, `hopf_gravity.rs`) and `tests/paper_hopf.rs` both include
-//! this file, so the figure, the claims table and the tests measure the same
-//! quantities against the same bounds. It names the reference as
-//! `crate::reference` (the scene declares it there; the test crate imports
-//! `common::reference` under that name).
+//! (`hopf_free.rs`, `hopf_gravity.rs`) and `tests/paper_hopf.rs` both use
+//! this module, so the figure, the claims table and the tests measure the same
+//! quantities against the same bounds.
 //!
 //! Conventions (those of shake_runtime::system): z = (q₀, q₁, p₀, p₁), X_F = (F_p, −F_q),
 //! {F,G} = F_q·G_p − F_p·G_q, q' = H_p + g_pᵀλ, p' = −H_q − g_qᵀλ. With

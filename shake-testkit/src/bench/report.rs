@@ -5,11 +5,12 @@
 
 use std::path::PathBuf;
 
-/// criterion's output directory (it follows `CARGO_TARGET_DIR`).
+/// criterion's output directory (it follows `CARGO_TARGET_DIR`; the
+/// workspace's `target/` otherwise, one level above this crate).
 pub fn criterion_dir() -> PathBuf {
     let target = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target"));
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target"));
     target.join("criterion")
 }
 
