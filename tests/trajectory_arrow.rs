@@ -19,9 +19,7 @@ fn read(bytes: &[u8]) -> Result<Trajectory, ArrowIoError> {
     Trajectory::read_arrow(Cursor::new(bytes))
 }
 
-#[path = "common/same_bits.rs"]
-mod same_bits;
-use same_bits::assert_same_bits;
+use shake_testkit::same_bits::assert_same_bits;
 
 fn rattle_run() -> Trajectory {
     let p = Pendulum {

@@ -12,9 +12,7 @@ fn to_csv(traj: &Trajectory) -> String {
     String::from_utf8(out).unwrap()
 }
 
-#[path = "common/same_bits.rs"]
-mod same_bits;
-use same_bits::assert_same_bits;
+use shake_testkit::same_bits::assert_same_bits;
 
 #[test]
 fn a_rattle_run_with_diagnostics_round_trips_bit_for_bit() {

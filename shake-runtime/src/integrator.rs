@@ -553,7 +553,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 
     /// [`StepError::NotOnConstraint`] for initial data (q, p), naming the
     /// constraint with the largest |g_i|.
-    pub(crate) fn off_m(&mut self, q: &[f64], p: &[f64], cause: Option<crate::SolveError>) -> StepError {
+    pub(crate) fn off_m(
+        &mut self,
+        q: &[f64],
+        p: &[f64],
+        cause: Option<crate::SolveError>,
+    ) -> StepError {
         self.system.constraints(q, p, &mut self.ws.g);
         let (residual, i) = largest(&self.ws.g);
         StepError::NotOnConstraint {

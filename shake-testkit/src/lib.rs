@@ -27,3 +27,4 @@ pub mod hopf_lab;
 pub mod models;
 pub mod plot;
 pub mod reference;
+pub mod same_bits;

@@ -1,6 +1,5 @@
 //! Bit-for-bit equality of two trajectories, for the file round trips
-//! (tests/trajectory_csv.rs, tests/trajectory_arrow.rs): included by path,
-//! so those tests do not build the rest of `common`.
+//! (tests/trajectory_csv.rs, tests/trajectory_arrow.rs).
 
 use shake::Trajectory;
 
