@@ -163,7 +163,9 @@ fn two_ranks_equal_one_process_and_keep_the_failures() {
             text.contains("check ok: 60 gathered members bit-identical"),
             "{text}"
         );
-        assert!(text.contains("member 7 failed as injected: non-finite initial state at step 0"));
+        assert!(text.contains(
+            "member 7 failed as injected: non-finite value in the initial state at step 0"
+        ));
         assert!(text.contains(
             "member 23 failed as injected: Newton did not converge in SHAKE (λ such that g(z1⁻) = 0) at step 5"
         ));
