@@ -49,7 +49,7 @@ impl fmt::Display for Stage {
 pub enum SolveError {
     /// The stopping rule (see [`newton`](crate::newton)) was not met within
     /// the iteration budget.
-    #[error("no convergence in {iterations} iterations (residual {residual:.1e})")]
+    #[error("no convergence in {iterations} iterations (residual {residual_})", residual_ = sci(*.residual))]
     NotConverged {
         /// Iterations done.
         iterations: usize,
@@ -90,6 +90,39 @@ pub fn human(x: f64) -> String {
         }
     } else {
         format!("{x:.1e}")
+    }
+}
+
+/// A residual, condition or tolerance for a message: two significant
+/// digits, in plain notation between 1e-3 and 1e4 (`4`, `0.25`, `1200`) and
+/// in scientific notation outside (`1.2e-9`), never `4.0e0`.
+///
+/// ```
+/// use shake_runtime::error::sci;
+/// assert_eq!(sci(4.0), "4");
+/// assert_eq!(sci(0.25), "0.25");
+/// assert_eq!(sci(1234.0), "1200");
+/// assert_eq!(sci(1.234e-9), "1.2e-9");
+/// assert_eq!(sci(f64::INFINITY), "inf");
+/// ```
+pub fn sci(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() || !(1e-3..1e4).contains(&x.abs()) {
+        return if x == 0.0 || !x.is_finite() {
+            format!("{x}")
+        } else {
+            format!("{x:.1e}")
+        };
+    }
+    // Round to two significant digits, then print without trailing zeros.
+    let e = x.abs().log10().floor() as i32;
+    let scale = 10f64.powi(1 - e);
+    let r = (x * scale).round() / scale;
+    let digits = (1 - e).max(0) as usize;
+    let s = format!("{r:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
     }
 }
 
@@ -175,7 +208,7 @@ pub enum StepError {
     /// SHAKE/RATTLE are not reliable. `condition` is the condition number of
     /// N relative to its size at the start of the run (see
     /// [`Options::max_condition`](crate::Options::max_condition)).
-    #[error("nondegeneracy lost in {stage} at step {step}, t = {}: condition of N = {condition:.1e} > limit {limit:.1e}", human(*.t))]
+    #[error("nondegeneracy lost in {stage} at step {step}, t = {}: condition of N = {condition_} > limit {limit_}", human(*.t), condition_ = sci(*.condition), limit_ = sci(*.limit))]
     NondegeneracyLost {
         /// Where it was detected.
         stage: Stage,
@@ -191,7 +224,7 @@ pub enum StepError {
     /// det N changed sign between two steps: the trajectory crossed (or
     /// jumped over) a point where N is singular, onto another component of
     /// M^H (the paper's Section 5.4.2, case iii).
-    #[error("jumped to another component of M^H at step {step}, t = {}: det N changed sign from {det_before:.1e} to {det_after:.1e}", human(*.t))]
+    #[error("jumped to another component of M^H at step {step}, t = {}: det N changed sign from {det_before_} to {det_after_}", human(*.t), det_before_ = sci(*.det_before), det_after_ = sci(*.det_after))]
     ComponentJump {
         /// Step index.
         step: u64,
@@ -207,7 +240,7 @@ pub enum StepError {
     /// is not the nearby one of order h but another intersection of the
     /// fibre with the modified hidden constraint set), or the projection's σ
     /// (Π landed on another crossing of the fibre with M^H).
-    #[error("fibre jump in {stage} at step {step}, t = {}: the fibre displacement is {lambda:.1e} but its linear prediction was {predicted:.1e}: Newton left the nearby point of M and M^H, which signals a fold or another component of M^H (Section 5.4.2)", human(*.t))]
+    #[error("fibre jump in {stage} at step {step}, t = {}: the fibre displacement is {lambda_} but its linear prediction was {predicted_}: Newton left the nearby point of M and M^H, which signals a fold or another component of M^H (Section 5.4.2)", human(*.t), lambda_ = sci(*.lambda), predicted_ = sci(*.predicted))]
     FibreJump {
         /// Where: SHAKE's λ or the projection's σ.
         stage: Stage,
@@ -223,7 +256,7 @@ pub enum StepError {
     /// The state handed to SHAKE/RATTLE is not on M = {g = 0} (or, for
     /// initial data, could not be brought onto it: then `cause` says why
     /// the projection onto M stopped).
-    #[error("not on M at step {step}, t = {}: |g| = {residual:.1e} > {tolerance:.1e}, largest for the constraint `{constraint}`", human(*.t))]
+    #[error("not on M at step {step}, t = {}: |g| = {residual_} > {tolerance_}, largest for the constraint `{constraint}`", human(*.t), residual_ = sci(*.residual), tolerance_ = sci(*.tolerance))]
     NotOnConstraint {
         /// Step index.
         step: u64,
