@@ -149,6 +149,10 @@ impl Hamiltonian for DeclaredSystem {
         self.program.quadratic_kinetic
     }
 
+    fn variable_name(&self, k: usize) -> std::borrow::Cow<'_, str> {
+        self.program.variable_names[k].as_str().into()
+    }
+
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
         let mut h = 0.0;
         self.program

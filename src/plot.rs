@@ -138,9 +138,10 @@ struct Chart {
 }
 
 /// The phase portrait: for each coordinate k, the curve (q_k, p_k) through
-/// the stored states, one colour per coordinate (the coordinates are
-/// numbered as in the trajectory; a declared `coordinates x, y;` is
-/// `q[0]` = x, `q[1]` = y). The start is marked with a dot.
+/// the stored states, one colour per coordinate, named as the system
+/// declared them ([`Trajectory::variable_name`]: `(x, p_x)` for
+/// `coordinates x, y; momenta p_x, p_y;`, `(q[1], p[1])` for arrays).
+/// The start is marked with a dot.
 ///
 /// ```
 /// use shake::prelude::*;
@@ -167,7 +168,7 @@ pub fn phase_portrait(traj: &Trajectory, path: impl AsRef<Path>) -> Result<(), P
             points.push((q, p));
         }
         curves.push(Curve {
-            name: format!("(q[{k}], p[{k}])"),
+            name: format!("({}, {})", traj.variable_name(k), traj.variable_name(d + k)),
             points,
         });
     }

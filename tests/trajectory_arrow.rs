@@ -135,12 +135,37 @@ fn damaged_files_are_typed_errors() {
             found: None
         })
     ));
+    // A renamed coordinate is a name, read back as it is; a renamed
+    // diagnostic breaks the layout.
+    assert_eq!(
+        read(&patched(&bytes, "q[1]", "y[1]"))
+            .unwrap()
+            .variable_name(1),
+        "y[1]"
+    );
     assert!(matches!(
-        read(&patched(&bytes, "q[1]", "y[1]")),
+        read(&patched(&bytes, "energy", "energx")),
         Err(ArrowIoError::BadSchema { .. })
     ));
     // Every cut of the file reads or fails with a typed error; none panics.
     for k in 0..bytes.len() {
         let _ = read(&bytes[..k]);
     }
+}
+
+#[test]
+fn columns_carry_the_declared_names_and_read_back() {
+    use shake::models::IndexOne;
+    let sys = IndexOne { coupling: 0.5 };
+    let mut integ = Integrator::new(sys, StormerVerlet, 0.05).with_diagnostics();
+    let z0 = shake::State::from_slices(&[0.5, 0.0], &[0.1, 0.0]);
+    let z0 = integ.project_to_hidden(&z0).unwrap();
+    let traj = integ.run(z0, Stop::Steps(10)).execute().trajectory;
+    let mut file = Vec::new();
+    traj.write_arrow(&mut file).unwrap();
+    let back = Trajectory::read_arrow(std::io::Cursor::new(file)).unwrap();
+    assert_eq!(back, traj);
+    let names: Vec<_> = (0..4).map(|k| back.variable_name(k).into_owned()).collect();
+    assert_eq!(names, ["q", "alpha", "p", "beta"]);
+    assert_eq!(back.constraint_name(0), "alpha_zero");
 }

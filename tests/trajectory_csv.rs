@@ -74,8 +74,20 @@ fn malformed_files_are_typed_errors() {
         read(&text.replacen("h=", "h=x", 1)),
         Err(CsvError::BadMetadata { .. })
     ));
+    // A renamed coordinate is a name, read back as it is; a renamed
+    // diagnostic or a multiplier of no constraint breaks the layout.
+    assert_eq!(
+        read(&text.replacen("q[1]", "y", 1))
+            .unwrap()
+            .variable_name(1),
+        "y"
+    );
     assert!(matches!(
-        read(&text.replacen("q[1]", "y", 1)),
+        read(&text.replacen("energy", "energie", 1)),
+        Err(CsvError::BadHeader { .. })
+    ));
+    assert!(matches!(
+        read(&text.replacen("sigma[rod]", "sigma[pole]", 1)),
         Err(CsvError::BadHeader { .. })
     ));
     let mut bad_number = lines.clone();
@@ -103,4 +115,55 @@ fn malformed_files_are_typed_errors() {
     for k in 0..text.len() {
         let _ = read(&text[..k]);
     }
+}
+
+shake::constrained_system! {
+    /// A pendulum whose pivot moves as y = a·cos(t), time the coordinate
+    /// `t`: its name is also the file's time column.
+    pub struct Driven {
+        parameters { a }
+        coordinates t, x, y;
+        momenta p_t, p_x, p_y;
+        hamiltonian = (p_x^2 + p_y^2) / 2 + y + p_t;
+        constraints { rod: x^2 + (y - a * cos(t))^2 - 1 }
+    }
+}
+
+#[test]
+fn columns_carry_the_declared_names_and_read_back() {
+    use shake::Hamiltonian;
+    let sys = Driven { a: 0.1 };
+    assert_eq!(
+        (0..6).map(|k| sys.variable_name(k)).collect::<Vec<_>>(),
+        ["t", "x", "y", "p_t", "p_x", "p_y"]
+    );
+    let mut integ = Integrator::new(sys, StormerVerlet, 0.05).with_diagnostics();
+    let z0 = shake::State::from_slices(&[0.0, 0.6, 0.1 - 0.8], &[0.0, 0.0, 0.0]);
+    let z0 = integ.project_to_hidden(&z0).unwrap();
+    let traj = integ.run(z0, Stop::Steps(20)).execute().trajectory;
+    let text = to_csv(&traj);
+    // The coordinate `t` is written `q:t`, so that `t` stays the time.
+    assert_eq!(
+        text.lines().nth(1).unwrap(),
+        "t,step,q:t,x,y,p_t,p_x,p_y,energy,constraint,hidden_constraint,\
+         max_shake_iterations,max_base_iterations,rattle_iterations,max_lambda,\
+         max_condition,lambda[rod],sigma[rod]"
+    );
+    let back = Trajectory::read_csv(text.as_bytes()).unwrap();
+    assert_eq!(back, traj);
+    assert_eq!(
+        (back.variable_name(0), back.constraint_name(0)),
+        ("t".into(), "rod".into())
+    );
+}
+
+#[test]
+fn files_with_numbered_columns_and_no_d_still_read() {
+    // The layout before the coordinates had names: no `d=` on the first
+    // line, coordinates `q[i]`, multipliers `lambda[i]`.
+    let old =
+        "# shake trajectory v1 t0=0 h=0.5 stride=1 m=0\nt,step,q[0],q[1],p[0],p[1]\n0,0,1,2,3,4\n";
+    let traj = Trajectory::read_csv(old.as_bytes()).unwrap();
+    assert_eq!((traj.q(0), traj.p(0)), (&[1.0, 2.0][..], &[3.0, 4.0][..]));
+    assert_eq!(traj.variable_name(3), "p[1]");
 }

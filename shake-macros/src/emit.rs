@@ -213,6 +213,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     };
     let pattern = der.g_z.iter().map(|((i, k), _)| quote!((#i, #k)));
     let names = sys.constraints.iter().map(|c| c.name.as_str());
+    let var_names = sys.graph.names.vars.iter().map(String::as_str);
     let g_entries: Vec<(usize, NodeId)> = der.g.iter().copied().enumerate().collect();
     let constraints = writes(&coder, "g", m, &g_entries, m);
     let jac: Vec<(usize, NodeId)> = der.g_z.iter().map(|((i, k), n)| (i + k * m, *n)).collect();
@@ -302,6 +303,10 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
             fn separable(&self) -> bool { #separable }
             #[inline]
             fn quadratic_kinetic(&self) -> bool { #quadratic_kinetic }
+            fn variable_name(&self, k: usize) -> ::std::borrow::Cow<'_, str> {
+                const NAMES: &[&str] = &[#(#var_names),*];
+                ::std::borrow::Cow::Borrowed(NAMES[k])
+            }
 
             #[inline]
             fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {

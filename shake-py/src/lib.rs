@@ -143,6 +143,13 @@ impl System {
         with_model!(&self.model, s => (0..s.constraint_count()).map(|i| s.constraint_name(i).to_string()).collect())
     }
 
+    /// The names of z's 2d entries as declared (`theta`, `p_theta`;
+    /// `q[0]` … for `dof q[d], p[d]`): the columns of `result.trajectory`.
+    #[getter]
+    fn variable_names(&self) -> Vec<String> {
+        with_model!(&self.model, s => (0..2 * s.dof()).map(|k| s.variable_name(k).into_owned()).collect())
+    }
+
     /// H(z) at a state z = (q, p) of length 2d.
     fn hamiltonian(&self, z: PyReadonlyArray1<f64>) -> PyResult<f64> {
         let (q, p) = self.split(&z)?;

@@ -84,6 +84,22 @@ def test_multipliers_are_returned_and_match_the_rod_tension():
     assert abs(out.sigma[1, 0] - h / 2 * g / 2) <= 1e-12
 
 
+def test_variables_and_constraints_carry_their_declared_names():
+    src = """
+struct Polar {
+    parameters { length }
+    coordinates x, y;
+    momenta p_x, p_y;
+    hamiltonian = (p_x^2 + p_y^2) / 2;
+    constraints { rod: x^2 + y^2 - length^2 }
+}"""
+    sys = shake.declare(src, length=1.0)
+    assert sys.variable_names == ["x", "y", "p_x", "p_y"]
+    assert sys.constraint_names == ["rod"]
+    pendulum = shake.declare(PENDULUM, length=1.0, gravity=9.81)
+    assert pendulum.variable_names == ["q[0]", "q[1]", "p[0]", "p[1]"]
+
+
 def test_a_bad_declaration_raises_with_its_position():
     src = PENDULUM.replace("gravity * q[1]", "gravty * q[1]")
     with pytest.raises(shake.DeclarationError) as info:

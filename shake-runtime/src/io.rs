@@ -14,10 +14,15 @@
 //! `max_shake_iterations`, `max_base_iterations`, `rattle_iterations`,
 //! `max_lambda`, `max_condition`, `lambda[0]` … `lambda[m-1]`, `sigma[0]` …
 //! `sigma[m-1]` (see [`Trajectory::lambda`], [`Trajectory::sigma`]).
-//! The system does not name its coordinates, so they are numbered.
+//! The state and multiplier columns carry the names the system declared
+//! ([`Trajectory::variable_name`], [`Trajectory::constraint_name`]):
+//! `t,step,theta,p_theta,…,lambda[rod],sigma[rod]`; the numbered names
+//! above are what a system that declares none gets. The first line also
+//! records d (`d=…`); files written before it was, with numbered columns,
+//! still read.
 
 use crate::diagnostics::DiagnosticRecord;
-use crate::trajectory::Trajectory;
+use crate::trajectory::{Names, Trajectory};
 use std::io::{BufRead, Write};
 
 const MAGIC: &str = "# shake trajectory v1";
@@ -108,25 +113,10 @@ impl Trajectory {
         // (diagnostics of a run that did not store its states have no
         // rows to go with; they are left out)
         let diag = !self.diagnostics.is_empty() && self.diagnostics.len() == self.len();
-        writeln!(w, "{MAGIC} t0={t0} h={h} stride={stride} m={m}")?;
-        write!(w, "t,step")?;
-        for i in 0..d {
-            write!(w, ",q[{i}]")?;
-        }
-        for i in 0..d {
-            write!(w, ",p[{i}]")?;
-        }
-        if diag {
-            for c in DIAG_COLUMNS {
-                write!(w, ",{c}")?;
-            }
-            for j in 0..m {
-                write!(w, ",lambda[{j}]")?;
-            }
-            for j in 0..m {
-                write!(w, ",sigma[{j}]")?;
-            }
-        }
+        let names = column_names(self, diag)
+            .map_err(|why| std::io::Error::new(std::io::ErrorKind::InvalidInput, why))?;
+        writeln!(w, "{MAGIC} t0={t0} h={h} stride={stride} m={m} d={d}")?;
+        write!(w, "{}", names.join(","))?;
         writeln!(w)?;
         for i in 0..self.len() {
             write!(w, "{},{}", self.time(i), self.step(i))?;
@@ -173,7 +163,7 @@ impl Trajectory {
         let meta = parse_metadata(&first).ok_or(CsvError::BadMetadata {
             found: first.clone(),
         })?;
-        let (t0, h, stride, m) = meta;
+        let (t0, h, stride, m, d) = meta;
         let header = lines.next().transpose()?.unwrap_or_default();
         let names: Vec<&str> = header.split(',').collect();
         let bad = |why| CsvError::BadHeader {
@@ -183,14 +173,9 @@ impl Trajectory {
         if names.len() < 2 || names[0] != "t" || names[1] != "step" {
             return Err(bad("it must start with t,step"));
         }
-        let d = names.iter().filter(|n| n.starts_with("q[")).count();
-        let diag = names.len() > 2 + 2 * d;
-        if names != column_names(d, m, diag) {
-            return Err(bad(
-                "the columns are not t, step, q[i], p[i] and the diagnostics",
-            ));
-        }
+        let (d, diag, declared) = parse_columns(&names, d, m).map_err(bad)?;
         let mut traj = Trajectory::new(d, t0, h, stride, 0);
+        traj.set_names(declared);
         let mut multipliers = Vec::new();
         let mut z = vec![0.0; 2 * d];
         for (k, line) in lines.enumerate() {
@@ -256,18 +241,117 @@ impl Trajectory {
     }
 }
 
-/// The columns of a trajectory with d coordinates and m constraints, in
-/// file order (shared by the CSV and the Arrow layout).
-pub(crate) fn column_names(d: usize, m: usize, diag: bool) -> Vec<String> {
+/// The fixed columns, which a declared name must not shadow.
+fn is_fixed(name: &str) -> bool {
+    name == "t" || name == "step" || DIAG_COLUMNS.contains(&name)
+}
+
+/// The columns of `traj` in file order (shared by the CSV and the Arrow
+/// layout): `t`, `step`, the 2d declared names of z = (q, p), and with
+/// diagnostics the diagnostic columns, `lambda[c]` and `sigma[c]` for each
+/// constraint c by its declared name. A declared name that is one of the
+/// fixed columns (a coordinate called `t`, as in a system made autonomous
+/// with time as a coordinate) is written with its half as a prefix, `q:t`.
+/// A name that would break the format (empty, with a comma, a quote or a
+/// line break) or that two entries share is an error.
+pub(crate) fn column_names(traj: &Trajectory, diag: bool) -> Result<Vec<String>, String> {
+    let (d, ..) = traj.layout();
+    let m = traj.constraints();
     let mut names: Vec<String> = vec!["t".into(), "step".into()];
-    names.extend((0..d).map(|i| format!("q[{i}]")));
-    names.extend((0..d).map(|i| format!("p[{i}]")));
+    for k in 0..2 * d {
+        let name = traj.variable_name(k);
+        if name.is_empty() || name.contains([',', '"', '\n', '\r']) {
+            return Err(format!(
+                "the name {name:?} of z[{k}] is empty or holds a comma, quote or line break"
+            ));
+        }
+        names.push(if is_fixed(&name) {
+            format!("{}:{name}", if k < d { "q" } else { "p" })
+        } else {
+            name.into_owned()
+        });
+    }
+    if let Some(k) = (3..names.len()).find(|&k| names[2..k].contains(&names[k])) {
+        return Err(format!("two entries of z are named {}", names[k]));
+    }
     if diag {
         names.extend(DIAG_COLUMNS.iter().map(|c| c.to_string()));
-        names.extend((0..m).map(|j| format!("lambda[{j}]")));
-        names.extend((0..m).map(|j| format!("sigma[{j}]")));
+        for half in ["lambda", "sigma"] {
+            for j in 0..m {
+                let c = traj.constraint_name(j);
+                if c.contains([',', '"', '\n', '\r']) {
+                    return Err(format!(
+                        "the constraint name {c:?} holds a comma, quote or line break"
+                    ));
+                }
+                names.push(format!("{half}[{c}]"));
+            }
+        }
     }
-    names
+    Ok(names)
+}
+
+/// (d, whether there are diagnostics, the declared names) from a file's
+/// columns, checked against the layout of [`column_names`]. `d` is the
+/// metadata's; files written before it was recorded number their
+/// coordinates `q[i]`, which gives d.
+pub(crate) fn parse_columns(
+    names: &[&str],
+    d: Option<usize>,
+    m: usize,
+) -> Result<(usize, bool, Names), &'static str> {
+    let layout = "the columns are not t, step, the 2d entries of z, and the diagnostics";
+    let d = d.unwrap_or_else(|| names.iter().filter(|n| n.starts_with("q[")).count());
+    let state_end = 2usize
+        .checked_add(d.checked_mul(2).ok_or(layout)?)
+        .ok_or(layout)?;
+    if names.len() < state_end || names[..2] != ["t", "step"] {
+        return Err(layout);
+    }
+    let strip = |name: &str| {
+        name.strip_prefix("q:")
+            .or_else(|| name.strip_prefix("p:"))
+            .filter(|n| is_fixed(n))
+            .unwrap_or(name)
+            .to_owned()
+    };
+    let variables: Vec<String> = names[2..state_end].iter().map(|n| strip(n)).collect();
+    if variables.iter().any(String::is_empty) {
+        return Err(layout);
+    }
+    let diag = names.len() > state_end;
+    let mut constraints = Vec::new();
+    if diag {
+        let rest = &names[state_end..];
+        if rest.len() != DIAG_COLUMNS.len() + 2 * m || rest[..DIAG_COLUMNS.len()] != DIAG_COLUMNS {
+            return Err(layout);
+        }
+        let mult = &rest[DIAG_COLUMNS.len()..];
+        for j in 0..m {
+            let lambda = mult[j]
+                .strip_prefix("lambda[")
+                .and_then(|c| c.strip_suffix(']'));
+            let sigma = mult[m + j]
+                .strip_prefix("sigma[")
+                .and_then(|c| c.strip_suffix(']'));
+            match (lambda, sigma) {
+                (Some(a), Some(b)) if a == b => constraints.push(a.to_owned()),
+                _ => {
+                    return Err(
+                        "the multipliers are not lambda[c] then sigma[c] for each constraint c",
+                    )
+                }
+            }
+        }
+    }
+    Ok((
+        d,
+        diag,
+        Names {
+            variables,
+            constraints,
+        },
+    ))
 }
 
 /// Appends the state z = (q, p) read at `step`, time `t`, after checking
@@ -295,8 +379,9 @@ pub(crate) fn push_checked(
     Ok(())
 }
 
-/// (t0, h, stride, m) from the first line.
-fn parse_metadata(line: &str) -> Option<(f64, f64, u64, usize)> {
+/// (t0, h, stride, m, d) from the first line (d is absent in files
+/// written before the coordinates had names).
+fn parse_metadata(line: &str) -> Option<(f64, f64, u64, usize, Option<usize>)> {
     let rest = line.strip_prefix(MAGIC)?;
     let mut it = rest.split_whitespace();
     let mut field = |key: &str| it.next()?.strip_prefix(key).map(str::to_owned);
@@ -304,5 +389,9 @@ fn parse_metadata(line: &str) -> Option<(f64, f64, u64, usize)> {
     let h = field("h=")?.parse().ok()?;
     let stride: u64 = field("stride=")?.parse().ok()?;
     let m = field("m=")?.parse().ok()?;
-    (stride >= 1).then_some((t0, h, stride, m))
+    let d = match field("d=") {
+        Some(d) => Some(d.parse().ok()?),
+        None => None,
+    };
+    (stride >= 1).then_some((t0, h, stride, m, d))
 }

@@ -16,7 +16,7 @@
 //! `shake.m` (numbers in Rust's shortest round-trip form).
 
 use crate::diagnostics::DiagnosticRecord;
-use crate::io::{column_names, push_checked};
+use crate::io::{column_names, parse_columns, push_checked};
 use crate::trajectory::Trajectory;
 use arrow_array::{Array, ArrayRef, Float64Array, RecordBatch, UInt64Array};
 use arrow_schema::{ArrowError, DataType, Field, Schema};
@@ -57,6 +57,9 @@ pub enum ArrowIoError {
         /// What is wrong.
         why: String,
     },
+    /// A declared name cannot be written as a column (writing only).
+    #[error("a declared name cannot name a column: {0}")]
+    BadName(String),
     /// A value is null (the layout has no nullable column).
     #[error("row {row}, column {column}: null")]
     Null {
@@ -118,7 +121,7 @@ impl Trajectory {
         // (diagnostics of a run that did not store its states have no
         // rows to go with; they are left out, as in the CSV)
         let diag = !self.diagnostics.is_empty() && self.diagnostics.len() == n;
-        let names = column_names(d, m, diag);
+        let names = column_names(self, diag).map_err(ArrowIoError::BadName)?;
         let f64s = |f: &dyn Fn(usize) -> f64| -> ArrayRef {
             Arc::new(Float64Array::from_iter_values((0..n).map(f)))
         };
@@ -166,6 +169,7 @@ impl Trajectory {
             ("shake.h".to_string(), h.to_string()),
             ("shake.stride".to_string(), stride.to_string()),
             ("shake.m".to_string(), m.to_string()),
+            ("shake.d".to_string(), d.to_string()),
         ]);
         let schema = Arc::new(Schema::new_with_metadata(fields, metadata));
         let batch = RecordBatch::try_new(schema.clone(), columns)?;
@@ -216,13 +220,13 @@ impl Trajectory {
             found: names.join(","),
             why,
         };
-        let d = names.iter().filter(|n| n.starts_with("q[")).count();
-        let diag = names.len() > 2 + 2 * d;
-        if names != column_names(d, m, diag) {
-            return Err(bad(
-                "the columns are not t, step, q[i], p[i] and the diagnostics".into(),
-            ));
-        }
+        // (files written before `shake.d` number their coordinates q[i])
+        let d = match meta.get("shake.d") {
+            Some(_) => Some(meta_value(meta, "shake.d")?),
+            None => None,
+        };
+        let (d, diag, declared) =
+            parse_columns(&names, d, m).map_err(|why| bad(why.to_string()))?;
         for f in schema.fields() {
             let want = if is_count(f.name()) {
                 DataType::UInt64
@@ -239,6 +243,7 @@ impl Trajectory {
         }
 
         let mut traj = Trajectory::new(d, t0, h, stride, 0);
+        traj.set_names(declared);
         let mut multipliers = Vec::new();
         let mut z = vec![0.0; 2 * d];
         let mut row0 = 0;
@@ -373,7 +378,7 @@ mod tests {
             .collect();
         let csv = String::from_utf8(csv).unwrap();
         assert_eq!(names.join(","), csv.lines().nth(1).unwrap());
-        assert!(names.contains(&"lambda[0]".to_string()));
+        assert!(names.contains(&"lambda[rod]".to_string()));
     }
 
     #[test]

@@ -99,6 +99,27 @@ pub trait Hamiltonian {
         false
     }
 
+    /// The declared name of z_k, the k-th entry of z = (q, p) (k < 2d):
+    /// `theta`, `p_theta` for `coordinates theta; momenta p_theta;`, or
+    /// `q[3]`, `p[3]` for `dof q[d], p[d];`. Exports name their columns
+    /// with it ([`Trajectory::write_csv`](crate::Trajectory::write_csv)).
+    /// The default numbers them `q[k]` and `p[k−d]`.
+    ///
+    /// ```
+    /// use shake_runtime::{Hamiltonian, examples::Pendulum};
+    /// let pendulum = Pendulum::default();
+    /// assert_eq!(pendulum.variable_name(0), "q[0]");
+    /// assert_eq!(pendulum.variable_name(3), "p[1]");
+    /// ```
+    fn variable_name(&self, k: usize) -> std::borrow::Cow<'_, str> {
+        let d = self.dof();
+        if k < d {
+            format!("q[{k}]").into()
+        } else {
+            format!("p[{}]", k - d).into()
+        }
+    }
+
     /// H(q, p).
     fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64;
 

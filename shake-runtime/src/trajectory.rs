@@ -11,6 +11,9 @@
 
 use crate::diagnostics::DiagnosticRecord;
 use crate::state::State;
+use crate::system::ConstrainedSystem;
+use std::borrow::Cow;
+use std::sync::Arc;
 
 /// The stored states of a run: state `i` at step [`step(i)`](Self::step),
 /// time [`time(i)`](Self::time), with `diagnostics[i]` when diagnostics are
@@ -45,6 +48,31 @@ pub struct Trajectory {
     constraints: usize,
     /// With the diagnostics: per record λ (m numbers) then σ (m numbers).
     multipliers: Vec<f64>,
+    /// The declared names of z's entries and of the constraints (`None`:
+    /// numbered, `q[k]`, `p[k]` and the constraint's index).
+    names: Option<Arc<Names>>,
+}
+
+/// What a trajectory calls its columns: the 2d entries of z = (q, p) and
+/// the m constraints, as the system declared them.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct Names {
+    pub(crate) variables: Vec<String>,
+    pub(crate) constraints: Vec<String>,
+}
+
+impl Names {
+    /// The names `sys` declares.
+    pub(crate) fn of<S: ConstrainedSystem>(sys: &S) -> Self {
+        Names {
+            variables: (0..2 * sys.dof())
+                .map(|k| sys.variable_name(k).into_owned())
+                .collect(),
+            constraints: (0..sys.constraint_count())
+                .map(|i| sys.constraint_name(i).to_owned())
+                .collect(),
+        }
+    }
 }
 
 /// Equal when every field is; the multipliers compare bit for bit (the
@@ -59,6 +87,8 @@ impl PartialEq for Trajectory {
             && self.regular == other.regular
             && self.extra == other.extra
             && self.diagnostics == other.diagnostics
+            && (0..2 * self.dof).all(|k| self.variable_name(k) == other.variable_name(k))
+            && (0..self.constraints).all(|i| self.constraint_name(i) == other.constraint_name(i))
             && self.constraints == other.constraints
             && self.multipliers.len() == other.multipliers.len()
             && self
@@ -91,6 +121,47 @@ impl Trajectory {
             diagnostics: Vec::new(),
             constraints: 0,
             multipliers: Vec::new(),
+            names: None,
+        }
+    }
+
+    /// Names the columns as `names` does.
+    pub(crate) fn set_names(&mut self, names: Names) {
+        self.names = Some(Arc::new(names));
+    }
+
+    /// The declared name of z_k, the k-th entry of the states' z = (q, p)
+    /// ([`Hamiltonian::variable_name`](crate::Hamiltonian::variable_name)
+    /// of the system that ran): `q[k]` or `p[k−d]` when the trajectory was
+    /// not made by a run (a default, or a file written without names).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+    /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(1)).execute().trajectory;
+    /// assert_eq!(traj.variable_name(1), "q[1]");
+    /// ```
+    pub fn variable_name(&self, k: usize) -> Cow<'_, str> {
+        match &self.names {
+            Some(n) if k < n.variables.len() => n.variables[k].as_str().into(),
+            _ if k < self.dof => format!("q[{k}]").into(),
+            _ => format!("p[{}]", k - self.dof).into(),
+        }
+    }
+
+    /// The declared name of constraint i (its index, `0`, `1`, …, when the
+    /// trajectory was not made by a run).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+    /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
+    /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(1)).execute().trajectory;
+    /// assert_eq!(traj.constraint_name(0), "rod");
+    /// ```
+    pub fn constraint_name(&self, i: usize) -> Cow<'_, str> {
+        match &self.names {
+            Some(n) if i < n.constraints.len() => n.constraints[i].as_str().into(),
+            _ => i.to_string().into(),
         }
     }
 

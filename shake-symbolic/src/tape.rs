@@ -130,6 +130,8 @@ pub struct Program {
     pub jacobian_pattern: Vec<(usize, usize)>,
     /// The constraint names (`rod`, `link[3]`).
     pub constraint_names: Vec<String>,
+    /// The names of z = (q, p), 2d of them (`theta`, `p_theta`; `q[0]`).
+    pub variable_names: Vec<String>,
 }
 
 /// A register file: the registers and the id of the program whose statics
@@ -472,6 +474,7 @@ impl Program {
             quadratic_kinetic: der.quadratic_kinetic,
             jacobian_pattern: der.g_z.iter().map(|e| e.0).collect(),
             constraint_names: sys.constraints.iter().map(|c| c.name.clone()).collect(),
+            variable_names: sys.graph.names.vars.clone(),
         };
         for t in p.tapes_mut() {
             shift(t, first);

@@ -26,7 +26,7 @@ use crate::rattle::project_hidden;
 use crate::state::State;
 use crate::step::Method;
 use crate::system::ConstrainedSystem;
-use crate::trajectory::Trajectory;
+use crate::trajectory::{Names, Trajectory};
 
 /// When a run stops.
 ///
@@ -355,6 +355,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             0
         };
         traj = Trajectory::new(integ.system.dof(), t0, h, stride, capacity);
+        traj.set_names(Names::of(&integ.system));
         if integ.diagnostics {
             traj.set_constraints(integ.system.constraint_count());
             traj.reserve_multipliers(capacity);
