@@ -19,6 +19,13 @@ use shake::{
 const H: f64 = 0.01;
 const T0: f64 = 0.5;
 const K: u64 = 12;
+/// The factor of the [`Break::SteepJacobian`] break, and the jump ratio of
+/// its run: the correction (1 − 1/STEEP)λ* = 0.44λ* exceeds JUMP times the
+/// prediction λ*/STEEP = 0.56λ*, while Newton, contracting by
+/// 1 − 1/STEEP < ½, still converges (at ½ the iteration gives up as
+/// stagnant: with the default ratio 1 the two limits coincide, STEEP = 2).
+const STEEP: f64 = 1.8;
+const JUMP: f64 = 0.5;
 
 #[derive(Copy, Clone, Debug, PartialEq)]
 enum Break {
@@ -29,6 +36,7 @@ enum Break {
     TinyN,
     FlippedN,
     FlatJacobian,
+    SteepJacobian,
 }
 
 /// The pendulum, broken by `brk` where the bob is higher than `c`.
@@ -95,6 +103,15 @@ impl ConstrainedSystem for Broken {
         self.sys.constraint_jacobian(q, p, g_z);
         if self.on(Break::FlatJacobian, q) {
             g_z.fill(0.0);
+        } else if self.on(Break::SteepJacobian, q) {
+            // A Jacobian STEEP times too steep: SHAKE's first Newton
+            // iterate λ₁ = λ*/STEEP undershoots, and the corrections that
+            // follow (contracting by 1 − 1/STEEP, so Newton still
+            // converges to the true λ*) add up to (1 − 1/STEEP)λ*, more
+            // than JUMP·λ₁: the jump test's signature of a far root.
+            for x in g_z.iter_mut() {
+                *x *= STEEP;
+            }
         }
     }
     fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) {
@@ -158,6 +175,15 @@ fn fails_at_k(brk: Break, stride: u64) -> StepError {
         c: threshold(),
     };
     let mut integ = Integrator::new(sys, StormerVerlet, H);
+    if brk == Break::SteepJacobian {
+        // Contracting by 1 − 1/STEEP ≈ 0.44, Newton needs ~45 iterations
+        // to reach round-off: let it, so that the jump test, not the
+        // iteration count, is what stops the step.
+        let mut opts = *integ.options();
+        opts.newton.max_iterations = 200;
+        opts.jump_ratio = JUMP;
+        integ = integ.with_options(opts);
+    }
     let out = integ
         .run(z0(), Stop::Steps(3 * K))
         .start_time(T0)
@@ -257,6 +283,28 @@ fn singular_shake_jacobian_is_not_lost_nondegeneracy() {
         "{e:?}"
     );
     assert!(!e.to_string().contains("nondegeneracy"), "{e}");
+}
+
+#[test]
+fn a_far_root_is_a_fibre_jump() {
+    let e = each_stride(Break::SteepJacobian);
+    match e {
+        StepError::FibreJump {
+            stage: Stage::Shake,
+            lambda,
+            predicted,
+            ..
+        } => {
+            // λ₁ = λ*/STEEP up to the equation's curvature over the
+            // step, O(‖λ‖) = O(h) relative (λ ≈ 0.05 here): what the test
+            // compares the correction with.
+            assert!(
+                (lambda / predicted - STEEP).abs() < 0.01 * STEEP,
+                "λ = {lambda:e}, λ₁ = {predicted:e}"
+            );
+        }
+        e => panic!("expected FibreJump, got {e:?}"),
+    }
 }
 
 #[test]
