@@ -28,3 +28,4 @@ pub mod models;
 pub mod plot;
 pub mod reference;
 pub mod same_bits;
+pub mod yoshida;
