@@ -298,3 +298,62 @@ fn known_limitation_a_composed_step_bounces_off_the_fold() {
     let t_last = out.trajectory.time(out.trajectory.len() - 1);
     assert!(t_last <= t_s + 0.3, "ran on to t = {t_last}, t_s = {t_s}");
 }
+
+/// `StepInfo::fold` = ‖N₁ − N₀‖‖N₁⁻¹‖ is h over the time left before N
+/// would be singular: checked against the same ratio computed from the
+/// reference solution (independent code: N = 4 Hr''(0) along the exact
+/// trajectory, so the ratio is |s_k − s_{k−1}|/|s_k| with s = Hr''), and
+/// it grows on the approach to the fold while a regular stretch keeps it
+/// at O(h).
+#[test]
+fn the_fold_indicator_is_h_over_the_time_left_before_n_is_singular() {
+    use std::ops::ControlFlow;
+    let sys = HopfGravity::new(0.0, -1.0, 1.0);
+    let (z0, s0) = doomed_start(oracle::PAPER_Z_A);
+    let t_s = quarter_time(&z0, s0);
+    for h in [0.01, 0.005] {
+        let mut seen: Vec<(f64, f64)> = Vec::new();
+        let mut watch = |e: &shake::StepEvent| {
+            seen.push((e.t, e.info.fold));
+            ControlFlow::Continue(())
+        };
+        let out = Integrator::new(sys, ImplicitMidpoint, h)
+            .run(z0.clone(), Stop::Time(20.0))
+            .on_step(&mut watch)
+            .execute();
+        assert!(out.error.is_some());
+        let upto: Vec<(f64, f64)> = seen.iter().copied().filter(|(t, _)| *t <= t_s).collect();
+        let mut times = vec![0.0];
+        times.extend(upto.iter().map(|(t, _)| *t));
+        let exact =
+            oracle::reference_trajectory(&oracle::HopfGravity::default(), &z0.to_vector(), &times);
+        let s: Vec<f64> = exact
+            .iter()
+            .map(|z| oracle::hr_second(&[z[0], z[1], z[2], z[3]], GV, 0.0))
+            .collect();
+        // The runtime's N is taken at the SHAKE states (on M, an O(h) fibre
+        // displacement from M^H) and carries the method's O(h²) error, so
+        // the two ratios (each O(h)) agree to O(h) relative plus O(h²).
+        let mut worst: f64 = 0.0;
+        for (k, &(_, fold)) in upto.iter().enumerate() {
+            let reference = (s[k + 1] - s[k]).abs() / s[k + 1].abs();
+            worst = worst.max((fold - reference).abs() / (h * reference + h * h));
+        }
+        let regular = upto
+            .iter()
+            .filter(|(t, _)| *t <= 0.5 * t_s)
+            .fold(0.0f64, |a, (_, f)| a.max(*f));
+        let last = seen[seen.len() - 1].1;
+        println!(
+            "h = {h}: |fold − reference| ≤ {worst:.2}·(h·reference + h²) up to t_s = {t_s}; \
+             ≤ {regular:.1e} up to t_s/2; {last:.2} at the last step, t = {:.3}",
+            seen[seen.len() - 1].0
+        );
+        assert!(worst <= 10.0, "h = {h}: {worst}");
+        // O(h) on the regular stretch (h·|Ṅ/N| with |Ṅ/N| ≤ 0.3 there) …
+        assert!(regular <= h, "h = {h}: {regular}");
+        // … and within a few steps of the fold by the time a guard stops
+        // the run.
+        assert!(last >= 0.25, "h = {h}: {last}");
+    }
+}

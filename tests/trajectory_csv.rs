@@ -151,6 +151,8 @@ fn columns_carry_the_declared_names_and_read_back() {
     );
     let back = Trajectory::read_csv(text.as_bytes()).unwrap();
     assert_eq!(back, traj);
+    // (equality compares numbers; the names are checked one by one)
+    assert!((0..6).all(|k| back.variable_name(k) == traj.variable_name(k)));
     assert_eq!(
         (back.variable_name(0), back.constraint_name(0)),
         ("t".into(), "rod".into())

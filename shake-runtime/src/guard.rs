@@ -23,7 +23,7 @@
 
 use crate::error::{SolveError, Stage, StepError};
 use crate::newton::NewtonOptions;
-use crate::rattle::{check_nondegeneracy, NondegeneracyCheck, ProjectionReport};
+use crate::rattle::{check_nondegeneracy, n_change, NondegeneracyCheck, ProjectionReport};
 use crate::shake::{ShakeReport, Workspace};
 use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
@@ -96,6 +96,8 @@ pub(crate) struct Guard {
     det_prev: f64,
     /// ‖N‖₁ at the result of the last substep.
     last_norm: f64,
+    /// Whether `ws.n_prev` holds N at the last checked state.
+    n_prev_valid: bool,
 }
 
 impl Guard {
@@ -105,6 +107,7 @@ impl Guard {
             reference_norm: f64::NAN,
             det_prev: f64::NAN,
             last_norm: f64::NAN,
+            n_prev_valid: false,
         }
     }
 
@@ -150,6 +153,8 @@ impl Guard {
             });
         }
         let nd = check_nondegeneracy(sys, q, p, ws);
+        n_change(ws);
+        self.n_prev_valid = true;
         self.nondegenerate(&nd, 0.0, Stage::Shake, step, t)?;
         self.reference_norm = nd.norm;
         self.det_prev = nd.det;
@@ -252,6 +257,15 @@ impl Guard {
             });
         }
         let nd = check_nondegeneracy(sys, q, p, ws);
+        // The fold indicator: the change of N over this (sub)step against
+        // N's distance to the singular matrices, 1/‖N⁻¹‖₁.
+        let change = n_change(ws);
+        info.fold = if self.n_prev_valid && change > 0.0 {
+            change * nd.inverse_norm
+        } else {
+            0.0
+        };
+        self.n_prev_valid = true;
         let stage = if projected {
             Stage::Rattle
         } else {

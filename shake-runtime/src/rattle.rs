@@ -271,6 +271,23 @@ fn band_norm1(a: &[f64], m: usize, band: Band) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// ‖N − N_prev‖₁ within N's band (`ws.n_mat` against `ws.n_prev`), then
+/// N_prev ← N: how much N changed since the last checked state.
+pub(crate) fn n_change(ws: &mut Workspace) -> f64 {
+    let (m, band) = (ws.m, ws.n_band);
+    let mut worst = 0.0f64;
+    for j in 0..m {
+        let (top, hi) = (j.saturating_sub(band.upper), (j + band.lower).min(m - 1));
+        let mut column = 0.0;
+        for k in top + j * m..=hi + j * m {
+            column += (ws.n_mat[k] - ws.n_prev[k]).abs();
+            ws.n_prev[k] = ws.n_mat[k];
+        }
+        worst = worst.max(column);
+    }
+    worst
+}
+
 /// Evaluates and factorises N(q, p).
 pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
     sys: &S,

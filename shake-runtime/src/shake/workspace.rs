@@ -34,6 +34,9 @@ pub(crate) struct Workspace {
     pub(crate) g_z_1: Vec<f64>,
     pub(crate) hidden: Vec<f64>,
     pub(crate) n_mat: Vec<f64>,
+    /// N at the previous checked state, within N's band (the fold
+    /// indicator of `Guard::after_shake` compares the two).
+    pub(crate) n_prev: Vec<f64>,
     // Our matrices.
     pub(crate) jac: Vec<f64>,
     pub(crate) piv: Vec<usize>,
@@ -114,6 +117,7 @@ impl Workspace {
             g_z_1: vec![0.0; m * n],
             hidden: vec![0.0; m],
             n_mat: vec![0.0; m * m],
+            n_prev: vec![0.0; m * m],
             jac: vec![0.0; m * m],
             // Two spare slots: `lu_factor` records a band there (linalg).
             piv: vec![0; m + 2],

@@ -59,6 +59,20 @@ pub struct StepInfo {
     pub condition: f64,
     /// det N at the new state.
     pub det_n: f64,
+    /// How near the step came to a point where N = {{H,g_i},g_j} is
+    /// singular: ‖N₁ − N₀‖₁ · ‖N₁⁻¹‖₁, N₀ and N₁ at the states before and
+    /// after the (sub)step (‖N₁⁻¹‖₁ estimated for m ≥ 2; the largest over
+    /// a composition's substeps; 0 at the first step of a run or when N
+    /// did not change). Since 1/‖N₁⁻¹‖₁ is N₁'s distance to the singular
+    /// matrices, this is h over the time left before N could become
+    /// singular at its present rate of change: O(h) on a regular
+    /// trajectory, growing like h/(t_s − t) towards a fold of M^H at t_s
+    /// (Section 5.4.2, case iii), where the equations for λ and σ get a
+    /// double root and the step is about to lose the nearby solution. At
+    /// 1 the next step may reach it. A diagnostic only: the run is stopped
+    /// by the guards ([`Options`](crate::Options)); watch this to stop it
+    /// earlier, e.g. in [`Run::on_step`](crate::Run::on_step).
+    pub fold: f64,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -92,6 +106,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             total.rattle_iterations += info.rattle_iterations;
             total.lambda = total.lambda.max(info.lambda);
             total.condition = total.condition.max(info.condition);
+            total.fold = total.fold.max(info.fold);
             total.det_n = info.det_n;
         }
         Ok(total)
