@@ -5,7 +5,8 @@
 //! [`step`](crate::step) (the maps SHAKE, RATTLE and their compositions),
 //! [`guard`](crate::guard) (every check of a step, configured by
 //! [`Options`]) and [`run`](crate::run) (the driver: stop rules, stride,
-//! storage, diagnostics, observers).
+//! storage, diagnostics, observers). The projections of initial data are
+//! in `initial_data` (onto M, and Π onto M^H) and `keep_positions`.
 //!
 //! ```
 //! use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
@@ -18,9 +19,8 @@
 
 use crate::base_map::BaseMap;
 use crate::composition::Composition;
-use crate::error::{Stage, StepError};
-use crate::guard::{largest, Guard};
-use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
+use crate::error::StepError;
+use crate::guard::Guard;
 use crate::shake::Workspace;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
@@ -472,102 +472,5 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let mut z1 = z.clone();
         self.step_in_place(&mut z1)?;
         Ok(z1)
-    }
-
-    /// Π: moves z ∈ M along its fibre onto M^H (RATTLE's projection).
-    ///
-    /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
-    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
-    /// let z = integ.project(&State::from_slices(&[0.0, -1.0], &[0.3, 0.4])).unwrap();
-    /// assert!((z.p[1]).abs() < 1e-15 && (z.p[0] - 0.3).abs() < 1e-15);
-    /// ```
-    pub fn project(&mut self, z: &State) -> Result<State, StepError> {
-        self.check_dims(z)?;
-        Guard::finite(z.q.as_slice(), z.p.as_slice(), "state", 0, 0.0)?;
-        validate::options(&self.guard.options)?;
-        let tol = self.guard.options.constraint_tolerance;
-        validate::on_constraint(
-            &self.system,
-            z.q.as_slice(),
-            z.p.as_slice(),
-            &mut self.ws.g,
-            tol,
-        )?;
-        let mut out = z.clone();
-        let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
-        project_hidden(&self.system, q, p, &mut self.ws, self.guard.newton())?;
-        validate::finite("projected state", q, p)?;
-        validate::on_constraint(&self.system, q, p, &mut self.ws.g, tol)?;
-        Ok(out)
-    }
-
-    /// Initial data: brings a nearby point onto M (Gauss–Newton, orthogonal
-    /// to M) and then onto M^H along the fibre (Π). Fails with a typed error
-    /// when either Newton iteration fails, when the result is not on M to
-    /// [`Options::constraint_tolerance`], or when N is singular there.
-    ///
-    /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, ConstrainedSystem, examples::Pendulum};
-    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
-    /// let z = integ.project_to_hidden(&State::from_slices(&[0.7, -0.75], &[1.0, 0.2])).unwrap();
-    /// let (mut g, mut gh) = ([0.0], [0.0]);
-    /// integ.system().constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
-    /// integ.system().hidden_constraints(z.q.as_slice(), z.p.as_slice(), &mut gh);
-    /// assert!(g[0].abs() < 1e-15 && gh[0].abs() < 1e-15);
-    /// ```
-    pub fn project_to_hidden(&mut self, z: &State) -> Result<State, StepError> {
-        self.check_dims(z)?;
-        Guard::finite(z.q.as_slice(), z.p.as_slice(), "initial state", 0, 0.0)?;
-        validate::options(&self.guard.options)?;
-        let mut out = z.clone();
-        let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
-        let opts = *self.guard.newton();
-        if let Err(e) = project_constraint(&self.system, q, p, &mut self.ws, &opts) {
-            // Gauss–Newton could not bring the point onto M: say how far it
-            // got, for which constraint, and why it stopped.
-            let cause = match e {
-                StepError::NewtonNotConverged { source, .. } => Some(source),
-                _ => None,
-            };
-            return Err(self.off_m(q, p, cause));
-        }
-        project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
-        validate::finite("projected state", q, p)?;
-        if self.system.constraint_count() > 0 {
-            self.system.constraints(q, p, &mut self.ws.g);
-            if !(largest(&self.ws.g).0 <= self.guard.options.constraint_tolerance) {
-                return Err(self.off_m(q, p, None));
-            }
-            let nd = check_nondegeneracy(&self.system, q, p, &mut self.ws);
-            if nd.inverse_norm.is_infinite() {
-                return Err(StepError::SingularNondegeneracyMatrix {
-                    stage: Stage::Rattle,
-                    step: 0,
-                    t: 0.0,
-                });
-            }
-        }
-        Ok(out)
-    }
-
-    /// [`StepError::NotOnConstraint`] for initial data (q, p), naming the
-    /// constraint with the largest |g_i|.
-    pub(crate) fn off_m(
-        &mut self,
-        q: &[f64],
-        p: &[f64],
-        cause: Option<crate::SolveError>,
-    ) -> StepError {
-        self.system.constraints(q, p, &mut self.ws.g);
-        let (residual, i) = largest(&self.ws.g);
-        StepError::NotOnConstraint {
-            step: 0,
-            t: 0.0,
-            residual,
-            tolerance: self.guard.options.constraint_tolerance,
-            constraint: self.system.constraint_name(i).to_string(),
-            cause,
-        }
     }
 }

@@ -66,6 +66,7 @@ pub mod error;
 pub mod examples;
 pub mod fibre;
 pub mod guard;
+mod initial_data;
 pub mod integrator;
 pub mod io;
 #[cfg(feature = "arrow")]
