@@ -5,7 +5,7 @@
 
 use super::cluster::ClusterArgs;
 use super::graph::{self, Numbering};
-use super::rattle::StepReport;
+use super::options::StepReport;
 use super::{ParticleError, ParticleSystem};
 use crate::solver::SpdSolver;
 

@@ -59,6 +59,7 @@ mod error;
 pub mod generate;
 mod global;
 mod graph;
+mod options;
 mod rattle;
 mod run;
 mod state;
@@ -70,7 +71,8 @@ mod table;
 #[doc(hidden)]
 pub use cluster::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 pub use error::ParticleError;
-pub use rattle::{Method, Options, Rattle, SolverChoice, StepReport};
+pub use options::{Method, Options, SolverChoice, StepReport};
+pub use rattle::Rattle;
 pub use run::{RunOutcome, RunSummary};
 pub use state::{ParticleState, Trajectory};
 pub use stencil::Stencil;
