@@ -33,7 +33,8 @@
 use shake::models::Pendulum;
 use shake::runtime::examples::HarmonicOscillator;
 use shake::{BaseMap, Composition, Integrator, State, Stop, StormerVerlet, Unconstrained};
-use shake_testkit::yoshida::{pendulum_reference, pendulum_state, Yoshida4};
+use shake_testkit::reference::{pendulum_reference, pendulum_state};
+use shake_testkit::yoshida::Yoshida4;
 
 /// The global error at T = 1 of RATTLE over `base` with step `h`, composed
 /// by `c`.

@@ -21,7 +21,8 @@ use shake::{
     Composition, ConstrainedSystem, Integrator, Method, Options, State, Stop, StormerVerlet,
     Unconstrained,
 };
-use shake_testkit::yoshida::{pendulum_reference, pendulum_state, Yoshida4};
+use shake_testkit::reference::{pendulum_reference, pendulum_state};
+use shake_testkit::yoshida::Yoshida4;
 
 const STEPS: [f64; 3] = [0.05, 0.025, 0.0125];
 

@@ -100,30 +100,14 @@ fn check_orders<S: ConstrainedSystem + Clone>(name: &str, sys: S, z0: State, exa
     }
 }
 
-/// The pendulum's angle ODE by RK4 with 10⁵ steps: θ(T), ω(T).
-fn pendulum_by_angle(gravity: f64, length: f64, theta: f64, omega: f64) -> (f64, f64) {
-    let n = 100_000;
-    let h = T / n as f64;
-    let f = |th: f64, w: f64| (w, -(gravity / length) * th.sin());
-    let (mut th, mut w) = (theta, omega);
-    for _ in 0..n {
-        let k1 = f(th, w);
-        let k2 = f(th + 0.5 * h * k1.0, w + 0.5 * h * k1.1);
-        let k3 = f(th + 0.5 * h * k2.0, w + 0.5 * h * k2.1);
-        let k4 = f(th + h * k3.0, w + h * k3.1);
-        th += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-        w += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-    }
-    (th, w)
-}
-
 #[test]
 fn pendulum_orders_against_the_angle_ode() {
     let sys = Pendulum {
         gravity: 2.0,
         length: 1.5,
     };
-    let (th, w) = pendulum_by_angle(sys.gravity, sys.length, 1.2, 0.3);
+    let (th, w) =
+        shake_testkit::reference::pendulum_reference(sys.gravity, sys.length, 1.2, 0.3, T);
     let exact = sys.state(th, w).to_vector();
     // The GBS oracle agrees with the angle ODE (two independent references).
     let ref_sys = oracle::PlanarPendulum {

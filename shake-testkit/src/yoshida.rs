@@ -7,9 +7,9 @@
 //! proof that a [`BaseMap`] can be implemented outside the runtime crate
 //! (issue 11). `examples/custom_base_map.rs` shows it, and
 //! `tests/custom_base_map.rs` checks its order and symplecticity; both take
-//! it from here. Also the pendulum reference both compare with.
+//! it from here.
 
-use shake::{BaseMap, Hamiltonian, NewtonOptions, SolveError, State};
+use shake::{BaseMap, Hamiltonian, NewtonOptions, SolveError};
 
 /// Yoshida's triple jump of a symmetric base map `B`.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
@@ -96,32 +96,4 @@ impl<B: BaseMap> BaseMap for Yoshida4<B> {
             self.0.reset_warm_start(stage);
         }
     }
-}
-
-/// The planar pendulum's angle θ'' = −(γ/ℓ) sin θ by classical RK4 with
-/// 100 000 steps: an independent reference (global error ~1e-15 at T = 1).
-pub fn pendulum_reference(gravity: f64, length: f64, theta: f64, omega: f64, t: f64) -> (f64, f64) {
-    let f = |th: f64, om: f64| (om, -(gravity / length) * th.sin());
-    let n = 100_000;
-    let dt = t / n as f64;
-    let (mut th, mut om) = (theta, omega);
-    for _ in 0..n {
-        let k1 = f(th, om);
-        let k2 = f(th + 0.5 * dt * k1.0, om + 0.5 * dt * k1.1);
-        let k3 = f(th + 0.5 * dt * k2.0, om + 0.5 * dt * k2.1);
-        let k4 = f(th + dt * k3.0, om + dt * k3.1);
-        th += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-        om += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-    }
-    (th, om)
-}
-
-/// The pendulum state (q, p) at angle θ from the downward vertical and
-/// angular velocity ω (unit mass).
-pub fn pendulum_state(length: f64, theta: f64, omega: f64) -> State {
-    let (s, c) = theta.sin_cos();
-    State::from_slices(
-        &[length * s, -length * c],
-        &[length * omega * c, length * omega * s],
-    )
 }
