@@ -45,7 +45,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Initial data: brings a nearby point onto M (Gauss–Newton, orthogonal
     /// to M) and then onto M^H along the fibre (Π). Fails with a typed error
     /// when either Newton iteration fails, when the result is not on M to
-    /// [`Options::constraint_tolerance`], or when N is singular there.
+    /// [`Options::constraint_tolerance`](crate::Options::constraint_tolerance), or when N is singular there.
     ///
     /// ```
     /// use shake_runtime::{Integrator, StormerVerlet, State, ConstrainedSystem, examples::Pendulum};

@@ -30,7 +30,7 @@ pub enum SolverChoice {
     Sparse,
 }
 
-/// Tolerances and choices of a [`Rattle`].
+/// Tolerances and choices of a [`Rattle`](super::Rattle).
 ///
 /// ```
 /// use shake_runtime::particles::{Method, Options};
