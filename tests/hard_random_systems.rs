@@ -124,11 +124,17 @@ fn check_base<S: ConstrainedSystem + Clone, B: BaseMap>(
     if let Some(e) = &out.error {
         prop_assert_eq!(*out.trajectory.steps().last().unwrap() + 1, e.step());
     }
-    for z in out.trajectory.states() {
+    for (k, z) in out.trajectory.states().enumerate() {
         let z = &z;
         let (g, gh) = residuals(&sys, z);
         let scale = (1.0 + coeff) * (1.0 + z.q.amax().max(z.p.amax()).powi(2));
-        prop_assert!(g <= 1e-13 * scale, "|g| = {:e}", g);
+        prop_assert!(
+            g <= 1e-13 * scale,
+            "|g| = {:e} > 1e-13·{:e} at state {}",
+            g,
+            scale,
+            k
+        );
         if s.rattle {
             prop_assert!(gh <= 1e-11 * scale, "|{{g,H}}| = {:e}", gh);
         }

@@ -8,7 +8,7 @@ use crate::base_map::BaseMap;
 use crate::error::{Stage, StepError};
 use crate::guard::{largest, Guard};
 use crate::integrator::Integrator;
-use crate::rattle::{check_nondegeneracy, project_constraint, project_hidden};
+use crate::rattle::{check_nondegeneracy, g_at_roundoff, project_constraint, project_hidden};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
 use crate::validate;
@@ -63,17 +63,26 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
         let opts = *self.guard.newton();
-        if let Err(e) = project_constraint(&self.system, q, p, &mut self.ws, &opts) {
-            // Gauss–Newton could not bring the point onto M: say how far it
-            // got, for which constraint, and why it stopped.
-            let cause = match e {
-                StepError::NewtonNotConverged { source, .. } => Some(source),
-                _ => None,
-            };
-            return Err(self.off_m(q, p, cause));
+        // Onto M, then Π along the fibre; Π keeps g = 0 only to the
+        // round-off of the fibre flow (it moves q too when g depends on p),
+        // so a state left above g's round-off goes round once more: each
+        // round starts closer, and three are more than round-off needs.
+        for _ in 0..3 {
+            if let Err(e) = project_constraint(&self.system, q, p, &mut self.ws, &opts) {
+                // Gauss–Newton could not bring the point onto M: say how
+                // far it got, for which constraint, and why it stopped.
+                let cause = match e {
+                    StepError::NewtonNotConverged { source, .. } => Some(source),
+                    _ => None,
+                };
+                return Err(self.off_m(q, p, cause));
+            }
+            project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
+            validate::finite("projected state", q, p)?;
+            if g_at_roundoff(&self.system, q, p, &mut self.ws) {
+                break;
+            }
         }
-        project_hidden(&self.system, q, p, &mut self.ws, &opts)?;
-        validate::finite("projected state", q, p)?;
         if self.system.constraint_count() > 0 {
             self.system.constraints(q, p, &mut self.ws.g);
             if !(largest(&self.ws.g).0 <= self.guard.options.constraint_tolerance) {

@@ -120,6 +120,21 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
         }
         converged = mon.update(step, norm_inf(&ws.sigma)) == Verdict::Converged;
     }
+    // Newton stops on its update; the residual must also be at round-off
+    // for the scale of {g,H}'s terms, else the update stalled short of the
+    // root (huge parameters or states, N ill-conditioned near an
+    // exceptional fibre): a typed error, never a state off M^H.
+    let residual = norm_inf(&ws.hidden);
+    let bound = hidden_roundoff(sys, &ws.z1[..2 * d], &mut ws.y[..2 * d]);
+    if !(residual <= bound) {
+        return Err(StepError::from_solve(
+            Stage::Rattle,
+            SolveError::NotConverged {
+                iterations: mon.iterations,
+                residual,
+            },
+        ));
+    }
     q.copy_from_slice(&ws.z1[..d]);
     p.copy_from_slice(&ws.z1[d..]);
     Ok(ProjectionReport {
@@ -127,6 +142,43 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
         displacement: norm_inf(&ws.sigma),
         predicted,
         correction,
+    })
+}
+
+/// The round-off level of {g,H} at z = (q, p): 1e-12 · (1 + |z|∞) ·
+/// (1 + |z|∞ + |∇H(z)|∞). Each term of {g,H} = g_q·H_p − g_p·H_q is a
+/// gradient of g (O(1 + |z|) for the constraints of the paper, quadratic in
+/// z) times one of H, so rounding z in its last bit changes {g,H} by about
+/// ε times this scale; 1e-12 ≈ 4500ε leaves room for the few thousand
+/// roundings of a projection (the bound `tests/fuzz_api.rs` and
+/// `tests/runtime_proptest.rs` hold every projection to). `grad` is
+/// scratch of length 2d.
+pub(crate) fn hidden_roundoff<S: ConstrainedSystem>(sys: &S, z: &[f64], grad: &mut [f64]) -> f64 {
+    let d = z.len() / 2;
+    let (hq, hp) = grad.split_at_mut(d);
+    sys.gradient(&z[..d], &z[d..], hq, hp);
+    let zmax = norm_inf(z);
+    1e-12 * (1.0 + zmax) * (1.0 + zmax + norm_inf(grad))
+}
+
+/// Whether g(q, p) is at its round-off: every |g_i| ≤ 64 ε Σ_k
+/// |∂g_i/∂z_k| |z_k|, what rounding each entry of z in its last bit
+/// changes g_i by, with room (64) for the roundings of the projection and
+/// fibre flow that computed z and of g's own evaluation.
+pub(crate) fn g_at_roundoff<S: ConstrainedSystem>(
+    sys: &S,
+    q: &[f64],
+    p: &[f64],
+    ws: &mut Workspace,
+) -> bool {
+    let (d, m) = (ws.d, ws.m);
+    sys.constraints(q, p, &mut ws.g);
+    sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+    (0..m).all(|i| {
+        let floor: f64 = (0..2 * d)
+            .map(|k| (ws.g_z_1[i + k * m] * if k < d { q[k] } else { p[k - d] }).abs())
+            .sum();
+        ws.g[i].abs() <= 64.0 * f64::EPSILON * floor
     })
 }
 
