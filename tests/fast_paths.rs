@@ -281,3 +281,109 @@ fn a_lazily_projected_run_is_the_general_run() {
         }
     }
 }
+
+/// A system of one constraint declared with `constrained_system!` steps on
+/// stack arrays of its own size (`classical::fixed`); the same classical
+/// step on the workspace's vectors (`fixed_size(false)`) is the reference.
+/// Single steps from the states of a run, whole runs (Kahan's carry, lazy
+/// and per-step projection), and the failure of a step too large to
+/// converge: the same states to round-off, the same error at the same step.
+#[test]
+fn the_fixed_size_step_is_the_slice_step() {
+    let pend = shake::models::Pendulum::new(1.0, 9.81);
+    let sphere = shake::models::SphericalPendulum::new(1.3, 9.81);
+    let sphere_start = State::from_slices(&[0.6, 0.3, -(1.69f64 - 0.45).sqrt()], &[0.4, -0.9, 0.0]);
+    fn both<S: ConstrainedSystem + Clone, B: BaseMap>(
+        sys: S,
+        base: B,
+        rattle: bool,
+        z0: &State,
+        h: f64,
+    ) -> f64 {
+        let make = |fixed: bool| {
+            let i = Integrator::new(sys.clone(), base, h).fixed_size(fixed);
+            if rattle {
+                i.rattle()
+            } else {
+                i.shake()
+            }
+        };
+        let (mut f, mut s) = (make(true), make(false));
+        let mut z = f.project_to_hidden(z0).unwrap();
+        let mut worst = 0.0f64;
+        for _ in 0..200 {
+            let zs = s.step(&z).unwrap();
+            f.step_in_place(&mut z).unwrap();
+            worst = worst.max(zs.distance(&z) / tolerance(&z, h));
+        }
+        // Whole runs, projected lazily (the default) and every step.
+        for every in [false, true] {
+            let opts = shake::Options {
+                project_every_step: every,
+                ..shake::Options::default()
+            };
+            let (mut f, mut s) = (
+                make(true).with_options(opts),
+                make(false).with_options(opts),
+            );
+            let z0 = f.project_to_hidden(z0).unwrap();
+            let a = f.run(z0.clone(), Stop::Steps(300)).execute();
+            let b = s.run(z0, Stop::Steps(300)).execute();
+            assert!(a.error.is_none() && b.error.is_none());
+            assert_eq!(a.trajectory.len(), b.trajectory.len());
+            for k in 0..a.trajectory.len() {
+                let (za, zb) = (a.trajectory.state(k), b.trajectory.state(k));
+                // Round-off grows along a run like the trajectories'
+                // own divergence; 300 steps of these pendulums stay
+                // within a few times the one-step tolerance.
+                worst = worst.max(za.distance(&zb) / (8.0 * tolerance(&za, h)));
+            }
+        }
+        worst
+    }
+    for rattle in [false, true] {
+        for h in [0.01, 0.05] {
+            let cases = [
+                (
+                    "pendulum SV",
+                    both(pend, StormerVerlet, rattle, &pendulum_start(), h),
+                ),
+                (
+                    "pendulum Euler",
+                    both(pend, SymplecticEuler, rattle, &pendulum_start(), h),
+                ),
+                (
+                    "sphere SV",
+                    both(sphere, StormerVerlet, rattle, &sphere_start, h),
+                ),
+                (
+                    "sphere Euler",
+                    both(sphere, SymplecticEuler, rattle, &sphere_start, h),
+                ),
+            ];
+            for (name, worst) in cases {
+                println!("{name}, rattle {rattle}, h {h}: worst / tolerance {worst:.3}");
+                assert!(worst <= 1.0, "{name}, rattle {rattle}, h {h}: {worst}");
+            }
+        }
+    }
+    // A step far outside Newton's basin fails the same way on both.
+    for h in [3.0, 40.0] {
+        let run = |fixed: bool| {
+            Integrator::new(pend, StormerVerlet, h)
+                .fixed_size(fixed)
+                .run(pendulum_start(), Stop::Steps(20))
+                .execute()
+        };
+        let (a, b) = (run(true), run(false));
+        let (ea, eb) = (a.error.expect("fails"), b.error.expect("fails"));
+        println!("h {h}: {ea}");
+        assert_eq!(
+            std::mem::discriminant(&ea),
+            std::mem::discriminant(&eb),
+            "{ea} / {eb}"
+        );
+        assert_eq!((ea.step(), ea.time()), (eb.step(), eb.time()));
+        assert_eq!(a.trajectory.len(), b.trajectory.len());
+    }
+}

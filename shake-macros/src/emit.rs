@@ -245,6 +245,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
 
     let fibre = match der.kind {
         Kind::None => quote! {
+            #[inline]
             fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::shake::runtime::ClosedForm {
                 ::shake::runtime::ClosedForm::Applied
             }
@@ -271,6 +272,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
                 quote!(p[#k] -= #v;)
             });
             quote! {
+                #[inline]
                 fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::shake::runtime::ClosedForm {
                     #q_in #l_in #lets #p_arr
                     #(#kicks)*
@@ -279,6 +281,23 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
             }
         }
         Kind::Quadratic | Kind::General => quote!(),
+    };
+
+    // The classical step on stack arrays of the system's size (the
+    // runtime's `classical::fixed`): it needs d as a constant, which only
+    // the macro knows.
+    let fixed = if der.kind == Kind::Holonomic && separable && quadratic_kinetic && m == 1 {
+        quote! {
+            #[inline]
+            fn classical_fixed(
+                &self,
+                cx: ::shake::runtime::classical::fixed::Substep<'_>,
+            ) -> ::core::option::Option<::core::result::Result<::shake::runtime::StepInfo, ::shake::runtime::StepError>> {
+                ::shake::runtime::classical::fixed::substep::<Self, #d>(self, cx)
+            }
+        }
+    } else {
+        quote!()
     };
 
     quote! {
@@ -338,12 +357,16 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
 
             #[inline]
             fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) { #constraints }
+            #[inline]
             fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]) { #jacobian }
             fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) { #g_hess }
+            #[inline]
             fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]) { #hidden }
             fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], out: &mut [f64]) { #hidden_jac }
+            #[inline]
             fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]) { #nondeg }
             #fibre
+            #fixed
         }
     }
 }

@@ -155,6 +155,12 @@ impl ConstrainedSystem for Pendulum {
         p[1] -= 2.0 * lambda[0] * q[1];
         ClosedForm::Applied
     }
+    fn classical_fixed(
+        &self,
+        cx: crate::classical::fixed::Substep<'_>,
+    ) -> Option<Result<crate::StepInfo, crate::StepError>> {
+        crate::classical::fixed::substep::<Self, 2>(self, cx)
+    }
 }
 
 /// The harmonic (Hopf) constraint of the paper's Section 5.4 with

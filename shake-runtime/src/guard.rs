@@ -23,7 +23,9 @@
 
 use crate::error::{SolveError, Stage, StepError};
 use crate::newton::NewtonOptions;
-use crate::rattle::{check_nondegeneracy, n_change, NondegeneracyCheck, ProjectionReport};
+use crate::rattle::{
+    check_nondegeneracy, factor_and_check, n_change, NondegeneracyCheck, ProjectionReport,
+};
 use crate::shake::{ShakeReport, Workspace};
 use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
@@ -98,6 +100,11 @@ pub(crate) struct Guard {
     last_norm: f64,
     /// Whether `ws.n_prev` holds N at the last checked state.
     n_prev_valid: bool,
+    /// ‖N⁻¹‖₁ at the last checked state as the check used it (an
+    /// estimate or a bound from one, see `inverse_bound`), and the last
+    /// estimate made (m ≥ 2).
+    inverse_prev: f64,
+    estimated: f64,
 }
 
 impl Guard {
@@ -108,6 +115,8 @@ impl Guard {
             det_prev: f64::NAN,
             last_norm: f64::NAN,
             n_prev_valid: false,
+            inverse_prev: f64::NAN,
+            estimated: f64::NAN,
         }
     }
 
@@ -155,6 +164,8 @@ impl Guard {
         let nd = check_nondegeneracy(sys, q, p, ws);
         n_change(ws);
         self.n_prev_valid = true;
+        self.inverse_prev = nd.inverse_norm;
+        self.estimated = nd.inverse_norm;
         self.nondegenerate(&nd, 0.0, Stage::Shake, step, t)?;
         self.reference_norm = nd.norm;
         self.det_prev = nd.det;
@@ -245,21 +256,89 @@ impl Guard {
         t: f64,
     ) -> Result<(), StepError> {
         let (residual, _) = largest(&ws.g);
+        self.on_m(residual, report.iterations, step, t)?;
+        sys.nondegeneracy_matrix(q, p, &mut ws.n_mat);
+        let change = n_change(ws);
+        let bound = self.inverse_bound(change);
+        let mut nd = factor_and_check(ws, bound);
+        if bound.is_none() || !(nd.condition(self.reference_norm) <= self.options.max_condition) {
+            // No bound, or one not sharp enough to pass the limit (the
+            // state is refused only on an estimate): estimate.
+            if bound.is_some() {
+                nd = factor_and_check(ws, None);
+            }
+            self.estimated = nd.inverse_norm;
+        }
+        self.inverse_prev = nd.inverse_norm;
+        self.judge_shake(&nd, change, report, info, projected, h, step, t)
+    }
+
+    /// An upper bound of ‖N₁⁻¹‖₁ from the last state's, without an
+    /// estimate: with E = N₁ − N₀ and ‖N₀⁻¹‖₁‖E‖₁ = x < 1,
+    /// ‖N₁⁻¹‖₁ ≤ ‖N₀⁻¹‖₁ / (1 − x) (the Neumann series of (I + N₀⁻¹E)⁻¹).
+    /// Along a regular trajectory x is O(h) (it is the fold indicator of
+    /// [`StepInfo::fold`]), so the bound grows slowly; it is used while
+    /// x < ½ and it stays within twice the last estimate, so the reported
+    /// condition is at most twice what an estimate would say, and Hager's
+    /// estimate (two triangular solve pairs, a third of a chain's step)
+    /// runs once in many steps instead of every step. Started from an
+    /// estimate (a lower bound of the true ‖N₀⁻¹‖₁ within a small factor),
+    /// the bound is as reliable as the estimate itself. `None` for m = 1
+    /// is harmless (N⁻¹ is a number there, computed exactly).
+    fn inverse_bound(&self, change: f64) -> Option<f64> {
+        if !self.n_prev_valid || !self.inverse_prev.is_finite() {
+            return None;
+        }
+        let x = self.inverse_prev * change;
+        if !(x < 0.5) {
+            return None;
+        }
+        let b = self.inverse_prev / (1.0 - x);
+        (b <= 2.0 * self.estimated).then_some(b)
+    }
+
+    /// The new state is on M: ‖g‖∞ (`residual`, NaN-propagating) within
+    /// the constraint tolerance.
+    pub(crate) fn on_m(
+        &self,
+        residual: f64,
+        iterations: usize,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
         if !(residual <= self.options.constraint_tolerance) {
             return Err(StepError::NewtonNotConverged {
                 stage: Stage::Shake,
                 step,
                 t,
                 source: SolveError::NotConverged {
-                    iterations: report.iterations,
+                    iterations,
                     residual,
                 },
             });
         }
-        let nd = check_nondegeneracy(sys, q, p, ws);
+        Ok(())
+    }
+
+    /// The checks of [`after_shake`](Self::after_shake) past the residual,
+    /// given N's check at the new state and ‖N₁ − N₀‖₁ (`change`), however
+    /// they were computed (the fixed-size classical step computes them on
+    /// the stack, `classical::fixed`).
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(crate) fn judge_shake(
+        &mut self,
+        nd: &NondegeneracyCheck,
+        change: f64,
+        report: &ShakeReport,
+        info: &mut StepInfo,
+        projected: bool,
+        h: f64,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
         // The fold indicator: the change of N over this (sub)step against
         // N's distance to the singular matrices, 1/‖N⁻¹‖₁.
-        let change = n_change(ws);
         info.fold = if self.n_prev_valid && change > 0.0 {
             change * nd.inverse_norm
         } else {
@@ -271,9 +350,9 @@ impl Guard {
         } else {
             Stage::Shake
         };
-        info.condition = self.nondegenerate(&nd, self.reference_norm, stage, step, t)?;
+        info.condition = self.nondegenerate(nd, self.reference_norm, stage, step, t)?;
         info.det_n = nd.det;
-        self.component(&nd, step, t)?;
+        self.component(nd, step, t)?;
         self.det_prev = nd.det;
         self.last_norm = nd.norm;
         self.jump(

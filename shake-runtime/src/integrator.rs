@@ -67,6 +67,9 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     /// (see `classical`), and whether it is used.
     pub(crate) classical: Option<(f64, f64)>,
     pub(crate) fast_paths: bool,
+    /// Whether the fast classical path may use the system's fixed-size
+    /// step (`classical::fixed`) when it has one.
+    pub(crate) fixed_size: bool,
     /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
     /// (set by the classical step's check and by `begin`).
     pub(crate) n_fresh: bool,
@@ -113,6 +116,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             out_p: vec![0.0; d],
             classical,
             fast_paths: true,
+            fixed_size: true,
             n_fresh: false,
             checked: vec![0.0; 2 * d],
             checked_valid: false,
@@ -211,6 +215,28 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn fast_paths(mut self, on: bool) -> Self {
         self.fast_paths = on;
+        self
+    }
+
+    /// On the classical fast path, use the system's fixed-size step when it
+    /// has one (default true): `constrained_system!` gives one to systems
+    /// of one constraint, which then step on stack arrays of their own
+    /// size with N a number. `false` keeps the classical path on the
+    /// workspace's vectors; both give the same steps to round-off
+    /// (`tests/fast_paths.rs`).
+    ///
+    /// ```
+    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
+    /// let fixed = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).step(&z0).unwrap();
+    /// let slices = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
+    ///     .fixed_size(false)
+    ///     .step(&z0)
+    ///     .unwrap();
+    /// assert!(fixed.distance(&slices) < 1e-15);
+    /// ```
+    pub fn fixed_size(mut self, on: bool) -> Self {
+        self.fixed_size = on;
         self
     }
 

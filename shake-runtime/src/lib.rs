@@ -54,7 +54,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod base_map;
-mod classical;
+#[doc(hidden)]
+pub mod classical;
 pub mod compensated;
 pub mod composition;
 pub mod diagnostics;

@@ -347,8 +347,15 @@ pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
     p: &[f64],
     ws: &mut Workspace,
 ) -> NondegeneracyCheck {
-    let m = ws.m;
     sys.nondegeneracy_matrix(q, p, &mut ws.n_mat);
+    factor_and_check(ws, None)
+}
+
+/// Factorises N (already in `ws.n_mat`) and checks it: det N, ‖N‖₁ and
+/// ‖N⁻¹‖₁, estimated by Hager's method for m ≥ 2 unless `bound` gives an
+/// upper bound of it already (see `Guard::judge_shake`).
+pub(crate) fn factor_and_check(ws: &mut Workspace, bound: Option<f64>) -> NondegeneracyCheck {
+    let m = ws.m;
     let norm = band_norm1(&ws.n_mat, m, ws.n_band);
     if !norm.is_finite() {
         return NondegeneracyCheck {
@@ -372,14 +379,17 @@ pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
         Ok(()) => NondegeneracyCheck {
             det: lu_det(&ws.jac, m, &ws.piv),
             norm,
-            inverse_norm: inverse_norm1_estimate_from(
-                &ws.jac,
-                m,
-                &ws.piv,
-                &mut ws.s1,
-                &mut ws.s2,
-                &mut ws.cond_column,
-            ),
+            inverse_norm: match bound {
+                Some(b) => b,
+                None => inverse_norm1_estimate_from(
+                    &ws.jac,
+                    m,
+                    &ws.piv,
+                    &mut ws.s1,
+                    &mut ws.s2,
+                    &mut ws.cond_column,
+                ),
+            },
         },
     }
 }

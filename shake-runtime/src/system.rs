@@ -196,4 +196,21 @@ pub trait ConstrainedSystem: Hamiltonian {
         let _ = (lambda, q, p);
         ClosedForm::Unavailable
     }
+
+    /// One classical substep (holonomic g, separable H with quadratic T,
+    /// a kick–drift–kick base map) on stack arrays of this system's size,
+    /// `crate::classical::fixed::substep::<Self, D>`: `constrained_system!`
+    /// implements it when m = 1, since it knows d at compile time. `None`
+    /// (the default) leaves the step to the runtime's slice path, which
+    /// computes the same map. A wrapper that changes any of the wrapped
+    /// system's functions must not forward this (the step would call the
+    /// wrapped functions, not the wrapper's).
+    #[doc(hidden)]
+    fn classical_fixed(
+        &self,
+        cx: crate::classical::fixed::Substep<'_>,
+    ) -> Option<Result<crate::step::StepInfo, crate::error::StepError>> {
+        let _ = cx;
+        None
+    }
 }

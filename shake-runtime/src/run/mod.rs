@@ -445,8 +445,18 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                     return fail(traj, e);
                 }};
             }
-            prev_q.copy_from_slice(&q);
-            prev_p.copy_from_slice(&p);
+            // The state before the step is read only when step k fails
+            // with step k − 1 not stored (the end must be stored then);
+            // the stored state of a lazy run only when a later step fails
+            // past it. Neither is copied when not needed (stride 1 copies
+            // nothing: every state is stored as it is made).
+            if last_recorded != k - 1 {
+                prev_q.copy_from_slice(&q);
+                prev_p.copy_from_slice(&p);
+            } else if lazy && stride > 1 {
+                rec_q.copy_from_slice(&q);
+                rec_p.copy_from_slice(&p);
+            }
             let info = match integ.advance(&mut q, &mut p, per_step, k, t) {
                 Ok(info) => {
                     acc.add(&info);
@@ -477,8 +487,6 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                     end_before!(e.at(k, t));
                 }
                 last_recorded = k;
-                rec_q.copy_from_slice(&q);
-                rec_p.copy_from_slice(&p);
             }
             if let Some(f) = on_step.as_mut() {
                 let event = StepEvent {

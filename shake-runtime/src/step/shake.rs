@@ -109,6 +109,30 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         } else {
             None
         };
+        if self.fixed_size {
+            let cx = crate::classical::fixed::Substep {
+                q: &mut *q,
+                p: &mut *p,
+                h,
+                kdk,
+                project,
+                step,
+                t,
+                newton,
+                guard: &mut self.guard,
+                ws: &mut self.ws,
+                carry,
+            };
+            if let Some(result) = self.system.classical_fixed(cx) {
+                self.n_fresh = result.is_ok();
+                return result;
+            }
+        }
+        let carry = if self.compensated && self.carrying {
+            Some(self.carry.as_mut_slice())
+        } else {
+            None
+        };
         let report =
             crate::classical::shake_step(&self.system, kdk, h, q, p, &mut self.ws, &newton, carry)
                 .map_err(|e| e.at(step, t))?;

@@ -39,6 +39,15 @@
 //! check (det N, condition estimate; O(1) for m = 1) and the projection
 //! (one solve, exact), whether the projection happens at once or only when
 //! the state is stored (q does not change between the two).
+//!
+//! # Fixed sizes
+//!
+//! For one constraint, a system that knows its d at compile time (every
+//! `constrained_system!`) takes the same step on stack arrays, with N and
+//! the Jacobian as numbers ([`fixed`]); the functions here serve every
+//! other classical system.
+
+pub mod fixed;
 
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
