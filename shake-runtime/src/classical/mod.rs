@@ -122,6 +122,28 @@ fn jacobian<S: ConstrainedSystem>(
         let hi = (j + band.lower).min(m - 1);
         ws.jac[lo + j * m..=hi + j * m].fill(0.0);
     }
+    if !ws.cl_mass.is_empty() {
+        // A diagonal (masses): J = −h Σ_k a_k G1[:,k] G0[:,k]ᵀ, a sum of
+        // outer products of G's sparse columns, with no call to `grad_p`
+        // and no column groups (a chain: 4 products per variable).
+        for k in 0..d {
+            let a = h * ws.cl_mass[k];
+            if a == 0.0 {
+                continue;
+            }
+            let rows = &ws.cl_col_rows[ws.cl_col_start[k]..ws.cl_col_start[k + 1]];
+            for &i in rows {
+                let gi = a * ws.g_z_1[i + k * m];
+                for &j in rows {
+                    if i <= j + band.lower && j <= i + band.upper {
+                        ws.jac[i + j * m] -= gi * ws.g_z_y[j + k * m];
+                    }
+                }
+            }
+        }
+        return band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
+            .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }));
+    }
     for c in 0..groups {
         // v = −G0ᵀ s_c, s_c the indicator of the columns j ≡ c; w = h A v.
         ws.cl_v.fill(0.0);

@@ -71,6 +71,13 @@ pub(crate) struct Workspace {
     pub(crate) cl_pattern: Vec<(usize, usize)>,
     /// The column group (i mod groups) of each entry of `cl_pattern`.
     pub(crate) cl_group: Vec<usize>,
+    /// The diagonal of the constant mass matrix A = H_pp when A is
+    /// diagonal (empty otherwise, or when the classical path does not
+    /// apply), and the rows of each column k of G in `cl_pattern` (CSC:
+    /// column k's rows are `cl_col_rows[cl_col_start[k]..cl_col_start[k+1]]`).
+    pub(crate) cl_mass: Vec<f64>,
+    pub(crate) cl_col_start: Vec<usize>,
+    pub(crate) cl_col_rows: Vec<usize>,
     /// −a h ∇V(q0), the first kick.
     pub(crate) cl_kick: Vec<f64>,
     /// The momentum increment before the last kick.
@@ -154,6 +161,9 @@ impl Workspace {
                 .filter(|&&(i, k)| i < m && k < d)
                 .map(|&(i, _)| i % groups)
                 .collect(),
+            cl_mass: diagonal_mass(sys),
+            cl_col_start: column_starts(sys, d, m),
+            cl_col_rows: column_rows(sys, d, m),
             cl_kick: vec![0.0; d],
             cl_u: vec![0.0; d],
             cl_v: vec![0.0; d],
@@ -163,6 +173,64 @@ impl Workspace {
             cond_column: usize::MAX,
         }
     }
+}
+
+/// The diagonal of A = H_pp when H is separable with a quadratic T and A
+/// is diagonal (masses), found by applying `grad_p` (= A p) to the unit
+/// vectors; empty otherwise, and for d > 2048 (d² work to find out).
+fn diagonal_mass<S: ConstrainedSystem>(sys: &S) -> Vec<f64> {
+    let d = sys.dof();
+    if !(sys.separable() && sys.quadratic_kinetic()) || d > 2048 {
+        return Vec::new();
+    }
+    let q = vec![0.5; d];
+    let (mut e, mut w) = (vec![0.0; d], vec![0.0; d]);
+    // T homogeneous: A·0 = 0 (else grad_p is not A p).
+    sys.grad_p(&q, &e, &mut w);
+    if w.iter().any(|&x| x != 0.0) {
+        return Vec::new();
+    }
+    let mut mass = vec![0.0; d];
+    for k in 0..d {
+        e[k] = 1.0;
+        w.fill(0.0);
+        sys.grad_p(&q, &e, &mut w);
+        e[k] = 0.0;
+        if w.iter().enumerate().any(|(j, &x)| j != k && x != 0.0) || !w[k].is_finite() {
+            return Vec::new();
+        }
+        mass[k] = w[k];
+    }
+    mass
+}
+
+/// `cl_col_start` of the classical path: where each column k < d of G
+/// starts in `column_rows`.
+fn column_starts<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize> {
+    let mut start = vec![0usize; d + 1];
+    for &(i, k) in sys.jacobian_pattern() {
+        if i < m && k < d {
+            start[k + 1] += 1;
+        }
+    }
+    for k in 0..d {
+        start[k + 1] += start[k];
+    }
+    start
+}
+
+/// The rows of each column k < d of G, column after column.
+fn column_rows<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize> {
+    let start = column_starts(sys, d, m);
+    let mut next = start.clone();
+    let mut rows = vec![0usize; start[d]];
+    for &(i, k) in sys.jacobian_pattern() {
+        if i < m && k < d {
+            rows[next[k]] = i;
+            next[k] += 1;
+        }
+    }
+    rows
 }
 
 /// A value no system computes: entries of a buffer still holding it after a
