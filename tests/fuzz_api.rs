@@ -409,6 +409,38 @@ fn kind(e: &StepError) -> &'static str {
     }
 }
 
+/// The largest bound `Options::constraint_tolerance` puts on |g_i| at z:
+/// tol · ‖∂g_i/∂z‖₁ · (‖q‖∞, ‖p‖∞ or ‖z‖∞: the variables g_i reads), the
+/// runtime's relative test.
+fn tolerance_at<S: ConstrainedSystem>(sys: &S, z: &State, tol: f64) -> f64 {
+    let (m, d) = (sys.constraint_count(), sys.dof());
+    if m == 0 || z.q.len() != d || z.p.len() != d {
+        return tol;
+    }
+    let mut gz = vec![0.0; m * 2 * d];
+    sys.constraint_jacobian(z.q.as_slice(), z.p.as_slice(), &mut gz);
+    let (mut size, mut reads_q, mut reads_p) = (vec![0.0; m], vec![false; m], vec![false; m]);
+    for &(i, k) in sys.jacobian_pattern() {
+        size[i] += gz[i + k * m].abs();
+        if k < d {
+            reads_q[i] = true;
+        } else {
+            reads_p[i] = true;
+        }
+    }
+    let (qmax, pmax) = (z.q.amax(), z.p.amax());
+    (0..m)
+        .map(|i| {
+            let scale = match (reads_q[i], reads_p[i]) {
+                (true, false) => qmax,
+                (false, true) => pmax,
+                _ => qmax.max(pmax),
+            };
+            tol * size[i] * scale
+        })
+        .fold(0.0f64, f64::max)
+}
+
 fn amax(v: &[f64]) -> f64 {
     v.iter().fold(0.0f64, |a, x| a.max(x.abs()))
 }
@@ -416,7 +448,8 @@ fn amax(v: &[f64]) -> f64 {
 /// `None` when z is finite, on M and (if `hidden`) on M^H to round-off;
 /// otherwise what is wrong.
 /// `slack` widens the bound on |g| for a run's initial state, which the run
-/// stores as given once |g| ≤ `Options::constraint_tolerance`.
+/// stores as given once |g| is within `Options::constraint_tolerance`
+/// (relative: see `tolerance_at`).
 fn off_manifold<S: ConstrainedSystem>(
     sys: &S,
     z: &State,
@@ -480,7 +513,7 @@ fn judge<S: ConstrainedSystem + Clone, B: BaseMap>(
         Op::Project => {
             // Π moves along fibres, on which g is constant: its input need
             // only be on M to the tolerance, and so is its result.
-            let tol = case.options.constraint_tolerance;
+            let tol = tolerance_at(&sys, &z0, case.options.constraint_tolerance);
             match integ.project(&z0) {
                 Err(e) => Verdict::Typed(kind(&e)),
                 Ok(z) => match off_manifold(&sys, &z, true, tol) {
@@ -524,7 +557,7 @@ fn judge<S: ConstrainedSystem + Clone, B: BaseMap>(
                 let z = traj.state(i);
                 let k = traj.step(i);
                 let slack = if k == 0 {
-                    case.options.constraint_tolerance
+                    tolerance_at(&sys, &z, case.options.constraint_tolerance)
                 } else {
                     0.0
                 };

@@ -5,7 +5,8 @@
 //! whether its result may be kept. The checks, in the order they run:
 //!
 //! - **finite**: no NaN or infinity in the new state;
-//! - **on M**: ‖g(z1)‖∞ ≤ [`Options::constraint_tolerance`] (SHAKE's Newton
+//! - **on M**: |g_i(z1)| within [`Options::constraint_tolerance`] relative
+//!   to g_i's scale (SHAKE's Newton
 //!   stops on the size of its updates, so far outside its basin it can stop
 //!   off M);
 //! - **nondegeneracy** (the paper's Assumption 1.1): the condition of
@@ -41,10 +42,19 @@ use crate::system::ConstrainedSystem;
 pub struct Options {
     /// Every Newton iteration of a step.
     pub newton: NewtonOptions,
-    /// A state handed to [`Integrator::step`](crate::Integrator::step) or [`Integrator::run`](crate::Integrator::run) must
-    /// satisfy ‖g‖∞ ≤ this (default 1e-8), else
-    /// [`StepError::NotOnConstraint`]. Every (sub)step's result must too,
-    /// else [`StepError::NewtonNotConverged`] in [`Stage::Shake`] (SHAKE's
+    /// A state z = (q, p) is on M when every constraint satisfies
+    /// |g_i(z)| ≤ this · ‖∂g_i/∂z‖₁ · s_i (default 1e-8), s_i the scale of
+    /// the variables g_i reads: ‖q‖∞ for a holonomic g_i, ‖p‖∞ for one of p
+    /// alone, ‖z‖∞ otherwise. This is relative to the size of g_i's terms,
+    /// so that a system and its copy with lengths scaled by L pass or fail
+    /// alike (for the pendulum's |q|² − ℓ² near M the factor is at most
+    /// 2√2·ℓ², so 1e-8 allows |q| − ℓ up to about 1.4e-8·ℓ). A state handed to
+    /// [`Integrator::step`](crate::Integrator::step) or
+    /// [`Integrator::run`](crate::Integrator::run) must be, else
+    /// [`StepError::NotOnConstraint`] (its `tolerance` is the bound of the
+    /// constraint at fault). Every (sub)step's result must be too, with
+    /// ‖∂g_i/∂z‖₁ measured at the start of the run or step, else
+    /// [`StepError::NewtonNotConverged`] in [`Stage::Shake`] (SHAKE's
     /// Newton stopped far from a root, which only happens for absurd h).
     pub constraint_tolerance: f64,
     /// After every step N is evaluated at the new state; the step fails with
@@ -149,17 +159,12 @@ impl Guard {
         if sys.constraint_count() == 0 {
             return Ok(());
         }
-        sys.constraints(q, p, &mut ws.g);
-        let (residual, i) = largest(&ws.g);
-        if !(residual <= self.options.constraint_tolerance) {
-            return Err(StepError::NotOnConstraint {
-                step,
-                t,
-                residual,
-                tolerance: self.options.constraint_tolerance,
-                constraint: sys.constraint_name(i).to_string(),
-                cause: None,
-            });
+        // (Also leaves ‖∂g_i/∂z‖₁ here in `ws.g_size`: the scale of every
+        // later step's test.)
+        if let Some(e) =
+            crate::validate::off_constraint(sys, q, p, ws, self.options.constraint_tolerance)
+        {
+            return Err(e.at(step, t));
         }
         let nd = check_nondegeneracy(sys, q, p, ws);
         n_change(ws);
@@ -255,8 +260,16 @@ impl Guard {
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
-        let (residual, _) = largest(&ws.g);
-        self.on_m(residual, report.iterations, step, t)?;
+        let scales = (max_abs(q, &[]), max_abs(&[], p));
+        self.on_m(
+            &ws.g,
+            &ws.g_size,
+            &ws.g_reads,
+            scales,
+            report.iterations,
+            step,
+            t,
+        )?;
         sys.nondegeneracy_matrix(q, p, &mut ws.n_mat);
         let change = n_change(ws);
         let bound = self.inverse_bound(change);
@@ -297,16 +310,24 @@ impl Guard {
         (b <= 2.0 * self.estimated).then_some(b)
     }
 
-    /// The new state is on M: ‖g‖∞ (`residual`, NaN-propagating) within
-    /// the constraint tolerance.
+    /// The new state is on M: every |g_i| within the constraint tolerance
+    /// relative to g_i's scale, `sizes[i]` = ‖∂g_i/∂z‖₁ (measured at the
+    /// start) times the scale (‖q‖∞, ‖p‖∞) of the variables g_i reads at
+    /// the new state (`validate::worst_constraint`; NaN is never within).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn on_m(
         &self,
-        residual: f64,
+        g: &[f64],
+        sizes: &[f64],
+        reads: &[u8],
+        scales: (f64, f64),
         iterations: usize,
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
-        if !(residual <= self.options.constraint_tolerance) {
+        let tol = self.options.constraint_tolerance;
+        let (residual, _, bound) = crate::validate::worst_constraint(g, sizes, reads, scales, tol);
+        if !(residual <= bound) {
             return Err(StepError::NewtonNotConverged {
                 stage: Stage::Shake,
                 step,
@@ -438,17 +459,14 @@ impl Guard {
     }
 }
 
-/// ‖v‖∞ and where it is attained, NaN-propagating (a NaN entry is the
-/// largest).
-pub(crate) fn largest(v: &[f64]) -> (f64, usize) {
-    let mut best = (0.0f64, 0);
-    for (i, x) in v.iter().enumerate() {
+/// ‖(q, p)‖∞, NaN-propagating.
+pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
+    let mut m = 0.0f64;
+    for x in q.iter().chain(p) {
         if x.is_nan() {
-            return (f64::NAN, i);
+            return f64::NAN;
         }
-        if x.abs() > best.0 {
-            best = (x.abs(), i);
-        }
+        m = m.max(x.abs());
     }
-    best
+    m
 }

@@ -6,7 +6,7 @@
 
 use crate::base_map::BaseMap;
 use crate::error::{Stage, StepError};
-use crate::guard::{largest, Guard};
+use crate::guard::Guard;
 use crate::integrator::Integrator;
 use crate::rattle::{check_nondegeneracy, g_at_roundoff, project_constraint, project_hidden};
 use crate::state::State;
@@ -31,14 +31,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             &self.system,
             z.q.as_slice(),
             z.p.as_slice(),
-            &mut self.ws.g,
+            &mut self.ws,
             tol,
         )?;
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
         project_hidden(&self.system, q, p, &mut self.ws, self.guard.newton())?;
         validate::finite("projected state", q, p)?;
-        validate::on_constraint(&self.system, q, p, &mut self.ws.g, tol)?;
+        validate::on_constraint(&self.system, q, p, &mut self.ws, tol)?;
         Ok(out)
     }
 
@@ -84,10 +84,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             }
         }
         if self.system.constraint_count() > 0 {
-            self.system.constraints(q, p, &mut self.ws.g);
-            if !(largest(&self.ws.g).0 <= self.guard.options.constraint_tolerance) {
-                return Err(self.off_m(q, p, None));
-            }
+            let tol = self.guard.options.constraint_tolerance;
+            validate::on_constraint(&self.system, q, p, &mut self.ws, tol)?;
             let nd = check_nondegeneracy(&self.system, q, p, &mut self.ws);
             if nd.inverse_norm.is_infinite() {
                 return Err(StepError::SingularNondegeneracyMatrix {
@@ -100,22 +98,30 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         Ok(out)
     }
 
-    /// [`StepError::NotOnConstraint`] for initial data (q, p), naming the
-    /// constraint with the largest |g_i|.
+    /// [`StepError::NotOnConstraint`] for initial data (q, p) known to be
+    /// off M, naming the constraint furthest off against its tolerance.
     pub(crate) fn off_m(
         &mut self,
         q: &[f64],
         p: &[f64],
         cause: Option<crate::SolveError>,
     ) -> StepError {
-        self.system.constraints(q, p, &mut self.ws.g);
-        let (residual, i) = largest(&self.ws.g);
+        let tol = self.guard.options.constraint_tolerance;
+        let (residual, i, tolerance) = if self.system.constraint_count() > 0 {
+            validate::furthest_off(&self.system, q, p, &mut self.ws, tol)
+        } else {
+            (0.0, 0, tol)
+        };
         StepError::NotOnConstraint {
             step: 0,
             t: 0.0,
             residual,
-            tolerance: self.guard.options.constraint_tolerance,
-            constraint: self.system.constraint_name(i).to_string(),
+            tolerance,
+            constraint: if self.system.constraint_count() > 0 {
+                self.system.constraint_name(i).to_string()
+            } else {
+                String::new()
+            },
             cause,
         }
     }

@@ -59,12 +59,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             });
         }
         Guard::finite(z.q.as_slice(), z.p.as_slice(), "initial state", 0, 0.0)?;
-        let mut g = vec![0.0; m];
-        sys.constraints(z.q.as_slice(), z.p.as_slice(), &mut g);
-        let residual = g.iter().fold(0.0f64, |r, x| r.max(x.abs()));
-        if !(residual <= self.options().constraint_tolerance) {
-            return Err(self.off_m(z.q.as_slice(), z.p.as_slice(), None));
-        }
+        let tol = self.options().constraint_tolerance;
+        crate::validate::on_constraint(
+            &self.system,
+            z.q.as_slice(),
+            z.p.as_slice(),
+            &mut self.ws,
+            tol,
+        )?;
         let out = self.project(z)?;
         // X_g of a holonomic g has no q component, so even a numerically
         // integrated fibre flow adds exact zeros to q.

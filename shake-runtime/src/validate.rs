@@ -26,6 +26,7 @@
 //! assert!(matches!(integ.step(&z0), Err(StepError::InvalidInput { .. })));
 //! ```
 
+use crate::shake::Workspace;
 use crate::{ConstrainedSystem, Options, StepError};
 
 /// The largest accepted `NewtonOptions::step_tolerance` (relative): above it a
@@ -99,35 +100,133 @@ pub(crate) fn finite(what: &'static str, q: &[f64], p: &[f64]) -> Result<(), Ste
     crate::guard::Guard::finite(q, p, what, 0, 0.0)
 }
 
-/// A state handed to Π (or produced by it) must lie on M to `tolerance`;
-/// `g` is scratch of length m.
+/// ‖∂g_i/∂z‖₁ for each i, from g_z (m × 2d, column-major) over the
+/// system's pattern of structurally nonzero entries.
+pub(crate) fn gradient_sizes(pattern: &[(usize, usize)], g_z: &[f64], out: &mut [f64]) {
+    let m = out.len();
+    out.fill(0.0);
+    for &(i, k) in pattern {
+        if let Some(v) = g_z.get(i + k * m).filter(|_| i < m) {
+            out[i] += v.abs();
+        }
+    }
+}
+
+/// Which half of z each g_i reads, from the pattern: bit 1 for q, bit 2
+/// for p.
+pub(crate) fn reads(pattern: &[(usize, usize)], d: usize, m: usize) -> Vec<u8> {
+    let mut kind = vec![0u8; m];
+    for &(i, k) in pattern {
+        if i < m {
+            kind[i] |= if k < d { 1 } else { 2 };
+        }
+    }
+    kind
+}
+
+/// The scale of the variables g_i reads: ‖q‖∞ for a g_i of q alone, ‖p‖∞
+/// for one of p alone, ‖z‖∞ otherwise. (Positions and momenta carry
+/// different units; a holonomic g is measured against the positions only,
+/// so that huge momenta cannot make a state far off M look close.)
+#[inline]
+pub(crate) fn variable_scale(reads: u8, qmax: f64, pmax: f64) -> f64 {
+    match reads {
+        1 => qmax,
+        2 => pmax,
+        _ => {
+            if qmax.is_nan() || pmax.is_nan() {
+                f64::NAN
+            } else {
+                qmax.max(pmax)
+            }
+        }
+    }
+}
+
+/// The constraint tolerance relative to g's scale (see
+/// [`Options::constraint_tolerance`]): the constraint whose |g_i| exceeds
+/// its bound `tolerance · sizes[i] · (scale of the variables it reads)` by
+/// the largest factor, as (|g_i|, i, that bound) (NaN the largest); the
+/// state is on M when |g_i| is within its bound.
+pub(crate) fn worst_constraint(
+    g: &[f64],
+    sizes: &[f64],
+    reads: &[u8],
+    (qmax, pmax): (f64, f64),
+    tolerance: f64,
+) -> (f64, usize, f64) {
+    let mut worst = (0.0, 0, 0.0);
+    let mut worst_ratio = f64::NEG_INFINITY;
+    for (i, gi) in g.iter().enumerate() {
+        let bound = tolerance * sizes[i] * variable_scale(reads[i], qmax, pmax);
+        let r = gi.abs();
+        let ratio = match r / bound {
+            x if x.is_nan() => f64::INFINITY,
+            x => x,
+        };
+        if ratio > worst_ratio {
+            worst = (r, i, bound);
+            worst_ratio = ratio;
+        }
+    }
+    worst
+}
+
+/// (q, p) lies on M to `tolerance`, relative to g's scale there
+/// ([`Options::constraint_tolerance`]), else [`StepError::NotOnConstraint`]
+/// for the constraint furthest off (step 0, t = 0: the caller stamps
+/// them). `ws.g`, `ws.g_z_1` and `ws.g_size` are scratch.
 pub(crate) fn on_constraint<S: ConstrainedSystem>(
     system: &S,
     q: &[f64],
     p: &[f64],
-    g: &mut [f64],
+    ws: &mut Workspace,
     tolerance: f64,
 ) -> Result<(), StepError> {
-    system.constraints(q, p, g);
-    // The largest |g_i| and its i; a NaN entry counts as the largest.
-    let (residual, i) = g.iter().enumerate().fold((0.0f64, 0), |(r, j), (i, x)| {
-        if x.abs() > r || x.is_nan() && !r.is_nan() {
-            (x.abs(), i)
-        } else {
-            (r, j)
-        }
-    });
-    if !(residual <= tolerance) {
-        return Err(StepError::NotOnConstraint {
-            step: 0,
-            t: 0.0,
-            residual,
-            tolerance,
-            constraint: system.constraint_name(i).to_string(),
-            cause: None,
-        });
+    if system.constraint_count() == 0 {
+        return Ok(());
     }
-    Ok(())
+    match off_constraint(system, q, p, ws, tolerance) {
+        None => Ok(()),
+        Some(e) => Err(e),
+    }
+}
+
+/// [`on_constraint`]'s error, or `None`.
+pub(crate) fn off_constraint<S: ConstrainedSystem>(
+    system: &S,
+    q: &[f64],
+    p: &[f64],
+    ws: &mut Workspace,
+    tolerance: f64,
+) -> Option<StepError> {
+    let (residual, i, bound) = furthest_off(system, q, p, ws, tolerance);
+    (!(residual <= bound)).then(|| StepError::NotOnConstraint {
+        step: 0,
+        t: 0.0,
+        residual,
+        tolerance: bound,
+        constraint: system.constraint_name(i).to_string(),
+        cause: None,
+    })
+}
+
+/// The constraint furthest off M against its tolerance at (q, p)
+/// ([`worst_constraint`]). Leaves g in `ws.g` and the gradient sizes in
+/// `ws.g_size`; m ≥ 1.
+pub(crate) fn furthest_off<S: ConstrainedSystem>(
+    system: &S,
+    q: &[f64],
+    p: &[f64],
+    ws: &mut Workspace,
+    tolerance: f64,
+) -> (f64, usize, f64) {
+    system.constraints(q, p, &mut ws.g);
+    ws.g_z_1.fill(0.0);
+    system.constraint_jacobian(q, p, &mut ws.g_z_1);
+    gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
+    let scales = (crate::guard::max_abs(q, &[]), crate::guard::max_abs(&[], p));
+    worst_constraint(&ws.g, &ws.g_size, &ws.g_reads, scales, tolerance)
 }
 
 #[cfg(test)]

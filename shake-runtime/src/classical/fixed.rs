@@ -300,11 +300,15 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     // The guard, with N = {{H,g},g} a number: its factorisation is itself,
     // its condition estimate 1/|N|.
     let guard = cx.guard;
-    guard.on_m(r.abs(), iterations, step, t)?;
+    let ws = cx.ws;
+    let scales = (
+        crate::guard::max_abs(&q, &[]),
+        crate::guard::max_abs(&[], &p),
+    );
+    guard.on_m(&[r], &ws.g_size, &ws.g_reads, scales, iterations, step, t)?;
     let mut n = [0.0];
     sys.nondegeneracy_matrix(&q, &p, &mut n);
     let n = n[0];
-    let ws = cx.ws;
     let nd = if !n.is_finite() {
         NondegeneracyCheck {
             det: f64::NAN,

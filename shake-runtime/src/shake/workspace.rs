@@ -76,6 +76,11 @@ pub(crate) struct Workspace {
     /// apply), and the rows of each column k of G in `cl_pattern` (CSC:
     /// column k's rows are `cl_col_rows[cl_col_start[k]..cl_col_start[k+1]]`).
     pub(crate) cl_mass: Vec<f64>,
+    /// ‖∂g_i/∂z‖₁ where the guard last measured it (the start of a run or
+    /// step): the scale of the constraint tolerance.
+    pub(crate) g_size: Vec<f64>,
+    /// Which half of z each g_i reads (`validate::reads`).
+    pub(crate) g_reads: Vec<u8>,
     pub(crate) cl_col_start: Vec<usize>,
     pub(crate) cl_col_rows: Vec<usize>,
     /// −a h ∇V(q0), the first kick.
@@ -162,6 +167,8 @@ impl Workspace {
                 .map(|&(i, _)| i % groups)
                 .collect(),
             cl_mass: diagonal_mass(sys),
+            g_size: vec![0.0; m],
+            g_reads: crate::validate::reads(sys.jacobian_pattern(), d, m),
             cl_col_start: column_starts(sys, d, m),
             cl_col_rows: column_rows(sys, d, m),
             cl_kick: vec![0.0; d],
