@@ -315,6 +315,7 @@ impl Guard {
     /// start) times the scale (‖q‖∞, ‖p‖∞) of the variables g_i reads at
     /// the new state (`validate::worst_constraint`; NaN is never within).
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     pub(crate) fn on_m(
         &self,
         g: &[f64],
@@ -326,6 +327,13 @@ impl Guard {
         t: f64,
     ) -> Result<(), StepError> {
         let tol = self.options.constraint_tolerance;
+        let (qmax, pmax) = scales;
+        let within = g.iter().zip(sizes).zip(reads).all(|((gi, si), &r)| {
+            gi.abs() <= tol * si * crate::validate::variable_scale(r, qmax, pmax)
+        });
+        if within {
+            return Ok(());
+        }
         let (residual, _, bound) = crate::validate::worst_constraint(g, sizes, reads, scales, tol);
         if !(residual <= bound) {
             return Err(StepError::NewtonNotConverged {
@@ -460,6 +468,7 @@ impl Guard {
 }
 
 /// ‖(q, p)‖∞, NaN-propagating.
+#[inline]
 pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
     let mut m = 0.0f64;
     for x in q.iter().chain(p) {
