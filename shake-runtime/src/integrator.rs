@@ -483,7 +483,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 
     /// One step: S_h(z) for SHAKE (z ∈ M), R_h(z) for RATTLE (z ∈ M^H).
     ///
-    /// The input must satisfy ‖g(z)‖ ≤ [`Options::constraint_tolerance`];
+    /// The input must lie on M to [`Options::constraint_tolerance`] (relative to g's scale);
     /// errors report step 1 and t = h (the step from t0 = 0).
     ///
     /// ```
