@@ -410,8 +410,8 @@ fn kind(e: &StepError) -> &'static str {
 }
 
 /// The largest bound `Options::constraint_tolerance` puts on |g_i| at z:
-/// tol · ‖∂g_i/∂z‖₁ · (‖q‖∞, ‖p‖∞ or ‖z‖∞: the variables g_i reads), the
-/// runtime's relative test.
+/// tol · (s/2)² + 64ε · s · (‖q‖∞, ‖p‖∞ or ‖z‖∞: the variables g_i reads),
+/// s = ‖∂g_i/∂z‖₁, the runtime's relative test.
 fn tolerance_at<S: ConstrainedSystem>(sys: &S, z: &State, tol: f64) -> f64 {
     let (m, d) = (sys.constraint_count(), sys.dof());
     if m == 0 || z.q.len() != d || z.p.len() != d {
@@ -436,7 +436,7 @@ fn tolerance_at<S: ConstrainedSystem>(sys: &S, z: &State, tol: f64) -> f64 {
                 (false, true) => pmax,
                 _ => qmax.max(pmax),
             };
-            tol * size[i] * scale
+            tol * (0.5 * size[i]).powi(2) + 64.0 * f64::EPSILON * size[i] * scale
         })
         .fold(0.0f64, f64::max)
 }

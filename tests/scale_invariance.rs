@@ -198,3 +198,50 @@ fn tiny_steps_are_not_refused() {
     let c = DoublePendulum::default();
     tiny("double pendulum", c, c.state(0.5, -0.3, 0.2, 0.4));
 }
+
+shake::constrained_system! {
+    /// A pendulum whose pivot is at (cx, 0).
+    struct ShiftedPendulum {
+        parameters { cx, length, gravity }
+        dof q[2], p[2];
+        hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
+        constraints { rod: (q[0] - cx)^2 + q[1]^2 - length^2 }
+    }
+}
+
+/// Moving the origin far away changes neither what the constraint
+/// tolerance accepts nor what runs: it is relative to g's own size,
+/// (‖∂g/∂z‖₁/2)² ≈ ℓ², plus g's round-off at z, which a far origin does
+/// raise (the points themselves are rounded to ε·|cx|). A state off the rod
+/// by 1e-3 ℓ is refused at every shift; a state on it to round-off runs.
+#[test]
+fn a_far_origin_neither_loosens_nor_breaks_the_constraint_tolerance() {
+    for cx in [0.0, 1e4, 1e8] {
+        let sys = ShiftedPendulum::new(cx, 1.0, 9.81);
+        let off = State::from_slices(&[cx + 1.0 + 1e-3, 0.0], &[0.0, 1.0]);
+        let r = Integrator::new(sys, StormerVerlet, 0.01).step(&off);
+        assert!(
+            matches!(r, Err(shake::StepError::NotOnConstraint { .. })),
+            "cx = {cx:e}: {r:?}"
+        );
+        let on = State::from_slices(&[cx + 0.6, -0.8], &[0.8, 0.6]);
+        for method in [Method::Shake, Method::Rattle] {
+            let out = Integrator::new(sys, StormerVerlet, 0.01)
+                .with_method(method)
+                .run(on.clone(), Stop::Steps(200))
+                .execute();
+            assert!(
+                out.error.is_none(),
+                "cx = {cx:e} {method:?}: {:?}",
+                out.error
+            );
+            let last = out.trajectory.last().unwrap();
+            let r = ((last.q[0] - cx).powi(2) + last.q[1].powi(2)).sqrt();
+            // The rod's length to the rounding of q at this shift.
+            assert!(
+                (r - 1.0).abs() <= 1e-14 + 8.0 * f64::EPSILON * cx,
+                "cx = {cx:e}: |q − c| = {r}"
+            );
+        }
+    }
+}

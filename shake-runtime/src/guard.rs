@@ -43,17 +43,20 @@ pub struct Options {
     /// Every Newton iteration of a step.
     pub newton: NewtonOptions,
     /// A state z = (q, p) is on M when every constraint satisfies
-    /// |g_i(z)| ≤ this · ‖∂g_i/∂z‖₁ · s_i (default 1e-8), s_i the scale of
-    /// the variables g_i reads: ‖q‖∞ for a holonomic g_i, ‖p‖∞ for one of p
-    /// alone, ‖z‖∞ otherwise. This is relative to the size of g_i's terms,
-    /// so that a system and its copy with lengths scaled by L pass or fail
-    /// alike (for the pendulum's |q|² − ℓ² near M the factor is at most
-    /// 2√2·ℓ², so 1e-8 allows |q| − ℓ up to about 1.4e-8·ℓ). A state handed to
+    /// |g_i(z)| ≤ this · (s_i/2)² + 64ε · s_i · ‖z‖, with s_i =
+    /// ‖∂g_i/∂z‖₁ and ‖z‖ the largest variable of the kind g_i reads (‖q‖∞
+    /// for a holonomic g_i, ‖p‖∞ for one of p alone, ‖z‖∞ otherwise)
+    /// (default 1e-8). The first term is relative to g_i's own size and
+    /// moves neither with units nor with the origin: a system and its copy
+    /// with lengths scaled by L pass or fail alike, and for a distance
+    /// constraint |q_a − q_b|² − ℓ² (where (s/2)² lies between ℓ² and 2ℓ²)
+    /// 1e-8 allows the length to be off by about 5e-9 ℓ. The second is g's
+    /// round-off at z. A state handed to
     /// [`Integrator::step`](crate::Integrator::step) or
     /// [`Integrator::run`](crate::Integrator::run) must be, else
     /// [`StepError::NotOnConstraint`] (its `tolerance` is the bound of the
     /// constraint at fault). Every (sub)step's result must be too, with
-    /// ‖∂g_i/∂z‖₁ measured at the start of the run or step, else
+    /// ‖∂g_i/∂z‖₁ measured in that step, else
     /// [`StepError::NewtonNotConverged`] in [`Stage::Shake`] (SHAKE's
     /// Newton stopped far from a root, which only happens for absurd h).
     pub constraint_tolerance: f64,
@@ -159,8 +162,6 @@ impl Guard {
         if sys.constraint_count() == 0 {
             return Ok(());
         }
-        // (Also leaves ‖∂g_i/∂z‖₁ here in `ws.g_size`: the scale of every
-        // later step's test.)
         if let Some(e) =
             crate::validate::off_constraint(sys, q, p, ws, self.options.constraint_tolerance)
         {
@@ -310,10 +311,11 @@ impl Guard {
         (b <= 2.0 * self.estimated).then_some(b)
     }
 
-    /// The new state is on M: every |g_i| within the constraint tolerance
-    /// relative to g_i's scale, `sizes[i]` = ‖∂g_i/∂z‖₁ (measured at the
-    /// start) times the scale (‖q‖∞, ‖p‖∞) of the variables g_i reads at
-    /// the new state (`validate::worst_constraint`; NaN is never within).
+    /// The new state is on M: every |g_i| within the bound of the
+    /// constraint tolerance (`validate::constraint_bound`), from
+    /// `sizes[i]` = ‖∂g_i/∂z‖₁ measured in the step and the scale
+    /// (‖q‖∞, ‖p‖∞) of the variables g_i reads at the new state (NaN is
+    /// never within).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(crate) fn on_m(
@@ -329,7 +331,8 @@ impl Guard {
         let tol = self.options.constraint_tolerance;
         let (qmax, pmax) = scales;
         let within = g.iter().zip(sizes).zip(reads).all(|((gi, si), &r)| {
-            gi.abs() <= tol * si * crate::validate::variable_scale(r, qmax, pmax)
+            let scale = crate::validate::variable_scale(r, qmax, pmax);
+            gi.abs() <= crate::validate::constraint_bound(tol, *si, scale)
         });
         if within {
             return Ok(());

@@ -143,11 +143,28 @@ pub(crate) fn variable_scale(reads: u8, qmax: f64, pmax: f64) -> f64 {
     }
 }
 
-/// The constraint tolerance relative to g's scale (see
-/// [`Options::constraint_tolerance`]): the constraint whose |g_i| exceeds
-/// its bound `tolerance · sizes[i] · (scale of the variables it reads)` by
-/// the largest factor, as (|g_i|, i, that bound) (NaN the largest); the
-/// state is on M when |g_i| is within its bound.
+/// The bound the constraint tolerance puts on |g_i| (see
+/// [`Options::constraint_tolerance`]), from s = ‖∂g_i/∂z‖₁ and the scale
+/// of the variables g_i reads ([`variable_scale`]):
+///
+/// tolerance · (s/2)² + 64 ε · s · scale.
+///
+/// The first term is relative to g_i's own size, in a way that neither a
+/// change of units nor a shift of the origin moves: for a distance
+/// constraint |q_a − q_b|² − ℓ², (s/2)² lies between ℓ² and 2ℓ², so 1e-8
+/// allows the length to be off by about 5e-9 ℓ. The second is the
+/// round-off of g at z, what rounding each variable in its last bit
+/// changes g_i by (with room for the roundings that computed z): a system
+/// far from its origin cannot place its points closer than that.
+#[inline]
+pub(crate) fn constraint_bound(tolerance: f64, size: f64, scale: f64) -> f64 {
+    let half = 0.5 * size;
+    tolerance * half * half + 64.0 * f64::EPSILON * size * scale
+}
+
+/// The constraint whose |g_i| exceeds its [`constraint_bound`] by the
+/// largest factor, as (|g_i|, i, that bound) (NaN the largest); the state
+/// is on M when |g_i| is within its bound.
 pub(crate) fn worst_constraint(
     g: &[f64],
     sizes: &[f64],
@@ -158,7 +175,7 @@ pub(crate) fn worst_constraint(
     let mut worst = (0.0, 0, 0.0);
     let mut worst_ratio = f64::NEG_INFINITY;
     for (i, gi) in g.iter().enumerate() {
-        let bound = tolerance * sizes[i] * variable_scale(reads[i], qmax, pmax);
+        let bound = constraint_bound(tolerance, sizes[i], variable_scale(reads[i], qmax, pmax));
         let r = gi.abs();
         let ratio = match r / bound {
             x if x.is_nan() => f64::INFINITY,

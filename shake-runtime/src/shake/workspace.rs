@@ -76,8 +76,8 @@ pub(crate) struct Workspace {
     /// apply), and the rows of each column k of G in `cl_pattern` (CSC:
     /// column k's rows are `cl_col_rows[cl_col_start[k]..cl_col_start[k+1]]`).
     pub(crate) cl_mass: Vec<f64>,
-    /// ‖∂g_i/∂z‖₁ where the guard last measured it (the start of a run or
-    /// step): the scale of the constraint tolerance.
+    /// ‖∂g_i/∂z‖₁ where it was last measured (the state being checked, or
+    /// the start of the step): the scale of the constraint tolerance.
     pub(crate) g_size: Vec<f64>,
     /// Which half of z each g_i reads (`validate::reads`).
     pub(crate) g_reads: Vec<u8>,

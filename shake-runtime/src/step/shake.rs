@@ -71,8 +71,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         // Newton's stopping rule looks at the size of its updates, not at
         // the residual; far outside its basin (absurd h) it can stop on a
         // huge λ with g ≠ 0. Such a state is refused here: a step never
-        // returns a point off M. (NaN-propagating maximum.)
+        // returns a point off M. (The tolerance's scale ‖∂g_i/∂z‖₁ is
+        // measured at the new state.)
         self.system.constraints(q, p, &mut self.ws.g);
+        self.system.constraint_jacobian(q, p, &mut self.ws.g_z_1);
+        crate::validate::gradient_sizes(&self.ws.pattern, &self.ws.g_z_1, &mut self.ws.g_size);
         self.guard.after_shake(
             &self.system,
             q,
@@ -143,7 +146,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         };
         Guard::finite(q, p, "state", step, t)?;
         // g at the new state was the last residual of SHAKE's iteration
-        // (the state is z0 + Δ, rounded once more by the addition).
+        // (the state is z0 + Δ, rounded once more by the addition); the
+        // tolerance's scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step.
+        crate::validate::gradient_sizes(&self.ws.cl_pattern, &self.ws.g_z_y, &mut self.ws.g_size);
         self.guard.after_shake(
             &self.system,
             q,
