@@ -296,11 +296,17 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     };
     cx.q.copy_from_slice(&q);
     cx.p.copy_from_slice(&p);
+    // As the slice path leaves them, whether the checks below pass or not:
+    // g at the new state, and the multipliers where the diagnostics read
+    // them.
+    let ws = cx.ws;
+    ws.g[0] = r;
+    ws.lambda[0] = lambda;
+    ws.lambda_first[0] = lambda_first;
     Guard::finite(&q, &p, "state", step, t)?;
     // The guard, with N = {{H,g},g} a number: its factorisation is itself,
     // its condition estimate 1/|N|.
     let guard = cx.guard;
-    let ws = cx.ws;
     let scales = (
         crate::guard::max_abs(&q, &[]),
         crate::guard::max_abs(&[], &p),
@@ -336,10 +342,6 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     ws.n_prev[0] = n;
     ws.n_mat[0] = n;
     ws.jac[0] = n;
-    ws.g[0] = r;
-    // The multipliers, where the diagnostics read them.
-    ws.lambda[0] = lambda;
-    ws.lambda_first[0] = lambda_first;
     guard.judge_shake(&nd, change, &report, &mut info, cx.project, h, step, t)?;
     if cx.project {
         // Π: one solve N σ = {g, H}, then the kick p ← p − σ G(q)ᵀ.
