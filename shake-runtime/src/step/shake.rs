@@ -107,12 +107,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         kdk: (f64, f64),
     ) -> Result<StepInfo, StepError> {
         let newton = *self.guard.newton();
-        let carry = if self.compensated && self.carrying {
-            Some(self.carry.as_mut_slice())
-        } else {
-            None
-        };
+        let carrying = self.compensated && self.carrying;
         if self.fixed_size {
+            let carry = carrying.then_some(self.carry.as_mut_slice());
             let cx = crate::classical::fixed::Substep {
                 q: &mut *q,
                 p: &mut *p,
@@ -131,11 +128,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 return result;
             }
         }
-        let carry = if self.compensated && self.carrying {
-            Some(self.carry.as_mut_slice())
-        } else {
-            None
-        };
+        let carry = carrying.then_some(self.carry.as_mut_slice());
         let report =
             crate::classical::shake_step(&self.system, kdk, h, q, p, &mut self.ws, &newton, carry)
                 .map_err(|e| e.at(step, t))?;
