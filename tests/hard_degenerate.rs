@@ -23,7 +23,8 @@
 //! start value along the exact solution. Then for several h and with and
 //! without composition:
 //! 1. the run ends with a typed error (NondegeneracyLost, ComponentJump,
-//!    FibreJump or NewtonNotConverged), never by running through;
+//!    FibreJump, NewtonNotConverged, or BranchJump for a composed step),
+//!    never by running through;
 //! 2. every returned state is on M^H, and on the start's component
 //!    (Hr''(0) keeps its sign) — no silent jump;
 //! 3. every returned state up to t_s agrees with the reference to the
@@ -34,10 +35,13 @@
 //!    of H on the fibre changes H by 0.04 here);
 //! 5. the run is not stopped early: it gets past t_s − 2h.
 //!
-//! Known limitation (an ignored test below): a *composed* step can bounce
-//! off the fold undetected — the triple jump at h = 0.05 from z_c's
-//! maximum lands on a neighbouring maximum (same sign of N, a λ its own
-//! Newton iteration predicted) and runs on past the impasse.
+//! A *composed* step can bounce off the fold where no check of its
+//! substeps sees it: the triple jump at h = 0.05 from z_c's maximum lands
+//! on a neighbouring maximum (same sign of N, a λ its own Newton iteration
+//! predicted). Stepping back with −h does not return (the step back finds
+//! the nearby solution from the new state), and that check
+//! (`Options::reverse_tolerance`) stops the run with BranchJump; with it
+//! turned off the run goes on past the impasse (both are tested below).
 //!
 //! With `Options::max_condition = 4` the approach itself is the stop: the
 //! run ends with NondegeneracyLost within a step or two of t_s.
@@ -105,6 +109,7 @@ fn typed_stop(e: &Option<StepError>) -> &'static str {
         Some(StepError::ComponentJump { .. }) => "ComponentJump",
         Some(StepError::FibreJump { .. }) => "FibreJump",
         Some(StepError::NewtonNotConverged { .. }) => "NewtonNotConverged",
+        Some(StepError::BranchJump { .. }) => "BranchJump",
         other => {
             panic!("the run must stop with a typed error near the degenerate point, got {other:?}")
         }
@@ -277,26 +282,65 @@ fn crossing_a_sign_change_of_n_is_refused_at_every_step_size() {
 }
 
 #[test]
-#[ignore = "known limitation: the triple jump bounces off the fold of M^H undetected (see docs)"]
-fn known_limitation_a_composed_step_bounces_off_the_fold() {
+fn a_composed_step_that_bounces_off_the_fold_is_refused_by_stepping_back() {
     // From the maximum of H on the fibre over z_c, triple jump, h = 0.05:
     // at t ≈ 2.13, a substep lands on the maximum of a neighbouring branch
     // of M^H (past the fold the fibre has four critical points, two of them
     // maxima close together). Newton's first iterate already predicts the
     // large λ (N is small there), so the fibre-jump test passes; N keeps
     // its sign, so the component test passes; |N| drops four-fold in that
-    // substep and λ/h grows 3.6-fold, H changes by 1.4e-3. The run then
-    // goes on to t = 10 on the other branch, past the impasse where the
-    // DAE has no solution. Single steps at every h tried stop in time.
+    // substep and λ/h grows 3.6-fold, H changes by 1.4e-3. Without the
+    // reverse check the run goes on to t = 20 on the other branch, past the
+    // impasse where the DAE has no solution.
     let sys = HopfGravity::new(0.0, -1.0, 1.0);
     let (z0, s0) = doomed_start(oracle::PAPER_Z_C);
     let t_s = quarter_time(&z0, s0);
-    let out = Integrator::new(sys, ImplicitMidpoint, 0.05)
-        .composed(Composition::TRIPLE_JUMP)
-        .run(z0, Stop::Time(20.0))
-        .execute();
+    let h = 0.05;
+    let run = |opts: Options| {
+        Integrator::new(sys, ImplicitMidpoint, h)
+            .composed(Composition::TRIPLE_JUMP)
+            .with_options(opts)
+            .run(z0.clone(), Stop::Time(20.0))
+            .execute()
+    };
+    let unchecked = run(Options {
+        reverse_tolerance: f64::INFINITY,
+        ..Options::default()
+    });
+    let t_unchecked = unchecked.trajectory.time(unchecked.trajectory.len() - 1);
+    assert!(
+        t_unchecked > t_s + 1.0,
+        "without the reverse check the jump is expected to pass unseen (t = {t_unchecked}, t_s = {t_s}): {:?}",
+        unchecked.error
+    );
+    let out = run(Options::default());
+    let e = out.error.expect("the run must stop near the fold");
+    let StepError::BranchJump {
+        miss, tolerance, ..
+    } = &e
+    else {
+        panic!("expected BranchJump, got {e:?}");
+    };
+    // The step back misses by the distance between the two maxima (O(0.1)
+    // on the unit fibre), far above the reverse step's round-off.
+    if let Some(miss) = miss {
+        assert!(
+            *miss > 1e3 * tolerance,
+            "miss {miss:e}, tolerance {tolerance:e}"
+        );
+    }
+    // Step k failed: the error says k and t0 + k·h, the last stored state
+    // is k − 1, and the run stopped before the impasse.
+    let k = e.step();
+    assert_eq!(e.time(), Some(k as f64 * h));
+    assert_eq!(*out.trajectory.steps().last().unwrap(), k - 1);
     let t_last = out.trajectory.time(out.trajectory.len() - 1);
     assert!(t_last <= t_s + 0.3, "ran on to t = {t_last}, t_s = {t_s}");
+    assert!(
+        t_last >= t_s - 0.5,
+        "stopped early at t = {t_last}, t_s = {t_s}"
+    );
+    assert!(e.to_string().contains("branch jump"), "{e}");
 }
 
 /// `StepInfo::fold` = ‖N₁ − N₀‖‖N₁⁻¹‖ is h over the time left before N

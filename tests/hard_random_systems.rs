@@ -21,7 +21,7 @@
 use proptest::prelude::*;
 use shake::{
     constrained_system, BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator,
-    State, Stop, StormerVerlet,
+    Options, State, StepError, Stop, StormerVerlet,
 };
 
 constrained_system! {
@@ -190,18 +190,19 @@ proptest! {
     }
 }
 
-/// Found by `momentum_dependent_quadratic_family` on 2026-11-25, and
-/// already there at commit 9d9e598, before that day's changes: one
-/// triple-jump RATTLE step over Störmer–Verlet and the step back with −h
-/// miss the start by 0.86 while every check of both steps passes. A
-/// substep lands on another crossing of its fibre with M^H, and neither
-/// the fibre-jump test (its Newton predicted the far root) nor the
-/// component test (det N keeps its sign) sees it. Issue 11, item (iii): a
-/// composition's reverse-step check must catch a branch jump that passes
-/// every other check. Kept as an ignored test until that check exists.
+/// Found by `momentum_dependent_quadratic_family` on 2026-11-25 (and
+/// already there at commit 9d9e598): one triple-jump RATTLE step over
+/// Störmer–Verlet and the step back with −h miss the start by 0.86 while
+/// every check of the substeps passes. A substep lands on another crossing
+/// of its fibre with M^H, and neither the fibre-jump test (its Newton
+/// predicted the far root) nor the component test (det N keeps its sign)
+/// sees it. The reverse check (`Options::reverse_tolerance`, issue 11
+/// item iii) refuses the step, and so does the round-off bound on g after
+/// a step (the jumped substep's Newton stops at 3.6e-13). The property
+/// `check` above passes on this case now. (`tests/hard_degenerate.rs`
+/// has a jump that only the reverse check sees.)
 #[test]
-#[ignore = "issue 11 (iii): a composed RATTLE step jumps branch undetected; its reverse misses by 0.86"]
-fn known_limitation_a_triple_jump_step_jumps_branch_in_the_quadratic_family() {
+fn a_triple_jump_step_that_jumps_branch_in_the_quadratic_family_is_refused() {
     let (alpha, beta, gamma, r) = (
         0.9983013639835069,
         1.5573773814093796,
@@ -220,17 +221,36 @@ fn known_limitation_a_triple_jump_step_jumps_branch_in_the_quadratic_family() {
         -1.0092629750955309,
     ];
     let sys = Harmonic::new(alpha, beta, gamma, r, k[0], k[1], k[2]);
+    let h = 0.06771814152970797;
+    let guess = State::from_slices(&z[..2], &z[2..]);
     let s = Setup {
-        h: 0.06771814152970797,
+        h,
         midpoint: false,
         triple_jump: true,
         rattle: true,
     };
-    check(
-        sys,
-        State::from_slices(&z[..2], &z[2..]),
-        s,
-        alpha + beta + r,
-    )
-    .unwrap();
+    check(sys, guess.clone(), s, alpha + beta + r).unwrap();
+
+    let integ = |reverse_tolerance: f64| {
+        Integrator::new(sys, StormerVerlet, h)
+            .composed(Composition::TRIPLE_JUMP)
+            .with_options(Options {
+                reverse_tolerance,
+                ..Options::default()
+            })
+    };
+    let z0 = integ(1e-6).project_to_hidden(&guess).unwrap();
+    // Refused at step 1, t = h, with the reverse check and without it: the
+    // substep that jumps also leaves |g| = 3.6e-13, above its round-off
+    // (the step bound of `Options::constraint_tolerance`'s docs), and
+    // before that bound existed the same step was `Ok` and the reverse
+    // check alone refused it.
+    for reverse in [1e-6, f64::INFINITY] {
+        match integ(reverse).step(&z0) {
+            Err(e @ (StepError::BranchJump { .. } | StepError::NewtonNotConverged { .. })) => {
+                assert_eq!((e.step(), e.time()), (1, Some(h)), "{e}");
+            }
+            other => panic!("expected a refusal, got {other:?}"),
+        }
+    }
 }

@@ -402,6 +402,9 @@ fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
         StepError::NondegeneracyLost { t, .. } => (NondegeneracyError::new_err(msg), *t, nan),
         StepError::ComponentJump { t, .. } => (ComponentJumpError::new_err(msg), *t, nan),
         StepError::FibreJump { t, .. } => (FibreJumpError::new_err(msg), *t, nan),
+        // Only composed steps are checked by stepping back, and Python runs
+        // single steps: the base class, with the time, should that change.
+        StepError::BranchJump { t, .. } => (ShakeError::new_err(msg), *t, nan),
         StepError::NotOnConstraint { t, residual, .. } => {
             (NotOnConstraintError::new_err(msg), *t, *residual)
         }

@@ -126,6 +126,22 @@ pub fn sci(x: f64) -> String {
     }
 }
 
+/// The second half of [`StepError::BranchJump`]'s message: how the step
+/// back went.
+fn reverse_outcome(miss: Option<f64>, tolerance: f64, cause: Option<&StepError>) -> String {
+    match (miss, cause) {
+        (Some(miss), _) => format!(
+            "the composed step taken back with −h misses its start by {} > {}: a substep landed on another solution branch",
+            sci(miss),
+            sci(tolerance)
+        ),
+        (None, Some(cause)) => format!(
+            "the composed step taken back with −h fails ({cause}): a substep may have landed on another solution branch"
+        ),
+        (None, None) => "the composed step taken back with −h does not return".to_string(),
+    }
+}
+
 /// A step (or a run, or the projection of initial data) failed.
 ///
 /// `step` is the index of the state the failing step was computing (step k
@@ -253,6 +269,31 @@ pub enum StepError {
         /// ‖λ₁‖∞ (or ‖σ₁‖∞) of the first Newton iterate.
         predicted: f64,
     },
+    /// A composed step (Section 4) is not undone by the same composition
+    /// with −h. Each substep is symmetric (S_{−h} ∘ S_h = id, R_{−h} ∘ R_h =
+    /// id on M^H), so a step that followed the nearby solution branch comes
+    /// back to its start to round-off; one whose substep landed on another
+    /// crossing of a fibre with M or M^H does not, even when every other
+    /// check passes (N keeps its sign and λ its first prediction when N is
+    /// small or flat along the fibre). `miss` is ‖back − start‖∞ (start
+    /// projected onto M^H when it was not on it), `None` when the step back
+    /// itself failed (`cause`). See
+    /// [`Options::reverse_tolerance`](crate::Options::reverse_tolerance).
+    #[error("branch jump at step {step}, t = {}: {}", human(*.t), reverse_outcome(*.miss, *.tolerance, .cause.as_deref()))]
+    BranchJump {
+        /// Step index.
+        step: u64,
+        /// Time.
+        t: f64,
+        /// How far the step back lands from the step's start (∞-norm).
+        miss: Option<f64>,
+        /// The largest miss accepted (relative tolerance times the state's
+        /// size).
+        tolerance: f64,
+        /// Why the step back failed, if it did.
+        #[source]
+        cause: Option<Box<StepError>>,
+    },
     /// The state handed to SHAKE/RATTLE is not on M = {g = 0} (or, for
     /// initial data, could not be brought onto it: then `cause` says why
     /// the projection onto M stopped).
@@ -292,6 +333,7 @@ impl StepError {
             | StepError::NondegeneracyLost { step, .. }
             | StepError::ComponentJump { step, .. }
             | StepError::FibreJump { step, .. }
+            | StepError::BranchJump { step, .. }
             | StepError::NotOnConstraint { step, .. } => step,
         }
     }
@@ -314,6 +356,7 @@ impl StepError {
             | StepError::NondegeneracyLost { t, .. }
             | StepError::ComponentJump { t, .. }
             | StepError::FibreJump { t, .. }
+            | StepError::BranchJump { t, .. }
             | StepError::NotOnConstraint { t, .. } => Some(t),
         }
     }
@@ -331,6 +374,7 @@ impl StepError {
             | StepError::NondegeneracyLost { step, t, .. }
             | StepError::ComponentJump { step, t, .. }
             | StepError::FibreJump { step, t, .. }
+            | StepError::BranchJump { step, t, .. }
             | StepError::NotOnConstraint { step, t, .. } => {
                 *step = step_index;
                 *t = time;

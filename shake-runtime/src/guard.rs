@@ -51,14 +51,16 @@ pub struct Options {
     /// with lengths scaled by L pass or fail alike, and for a distance
     /// constraint |q_a − q_b|² − ℓ² (where (s/2)² lies between ℓ² and 2ℓ²)
     /// 1e-8 allows the length to be off by about 5e-9 ℓ. The second is g's
-    /// round-off at z. A state handed to
+    /// round-off at z. It must lie in (0, 1]. A state handed to
     /// [`Integrator::step`](crate::Integrator::step) or
     /// [`Integrator::run`](crate::Integrator::run) must be, else
     /// [`StepError::NotOnConstraint`] (its `tolerance` is the bound of the
-    /// constraint at fault). Every (sub)step's result must be too, with
-    /// ‖∂g_i/∂z‖₁ measured in that step, else
-    /// [`StepError::NewtonNotConverged`] in [`Stage::Shake`] (SHAKE's
-    /// Newton stopped far from a root, which only happens for absurd h).
+    /// constraint at fault). This tolerance is for the data a run starts
+    /// from: every (sub)step's result must be on M to round-off,
+    /// |g_i| ≤ max(64ε, `newton.step_tolerance`) · s_i · ‖z‖ with s_i
+    /// measured in that step, else [`StepError::NewtonNotConverged`] in
+    /// [`Stage::Shake`] (SHAKE's Newton stopped short of its root: an
+    /// ill-conditioned λ or an absurd h).
     pub constraint_tolerance: f64,
     /// After every step N is evaluated at the new state; the step fails with
     /// [`StepError::NondegeneracyLost`] when max(‖N‖₁, ‖N₀‖₁) · ‖N⁻¹‖₁ exceeds
@@ -84,6 +86,20 @@ pub struct Options {
     /// at the states that are stored or observed (default false; both give
     /// the same states to round-off, by Π ∘ S_hᵏ = Π ∘ R_hᵏ).
     pub project_every_step: bool,
+    /// A composed step ([`Composition`](crate::Composition) with more than
+    /// one stage, over a symmetric base map) is taken back with −h from its
+    /// result, and the step fails with [`StepError::BranchJump`] when that
+    /// misses the step's start by more than this times the state's size
+    /// (max of ‖z₀‖∞ and ‖z₁‖∞; default 1e-6). The substeps are symmetric,
+    /// so a step on the nearby branch returns to round-off amplified by
+    /// the conditioning of its Newton solves (≈ 1e-13 on the paper's
+    /// examples), while a substep that landed on another crossing of a
+    /// fibre misses by the distance between the crossings. This is the one
+    /// check that sees such a jump when N keeps its sign and λ stays near
+    /// its first prediction (Section 5.4.2; `tests/hard_degenerate.rs`).
+    /// It doubles the cost of a composed step; `f64::INFINITY` turns it
+    /// off. Single steps are not checked this way.
+    pub reverse_tolerance: f64,
 }
 
 impl Default for Options {
@@ -95,6 +111,7 @@ impl Default for Options {
             jump_ratio: 1.0,
             check_component: true,
             project_every_step: false,
+            reverse_tolerance: 1e-6,
         }
     }
 }
@@ -311,11 +328,13 @@ impl Guard {
         (b <= 2.0 * self.estimated).then_some(b)
     }
 
-    /// The new state is on M: every |g_i| within the bound of the
-    /// constraint tolerance (`validate::constraint_bound`), from
-    /// `sizes[i]` = ‖∂g_i/∂z‖₁ measured in the step and the scale
-    /// (‖q‖∞, ‖p‖∞) of the variables g_i reads at the new state (NaN is
-    /// never within).
+    /// The new state is on M to round-off: every |g_i| within
+    /// `validate::step_bound`, max(64ε, Newton's step tolerance) · s_i ·
+    /// scale, from `sizes[i]` = ‖∂g_i/∂z‖₁ measured in the step and the
+    /// scale (‖q‖∞, ‖p‖∞) of the variables g_i reads at the new state (NaN
+    /// is never within). A residual above it means SHAKE's Newton stopped
+    /// on its update short of its root (an ill-conditioned λ, an absurd h):
+    /// `NewtonNotConverged`, never a state off M.
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(crate) fn on_m(
@@ -328,16 +347,19 @@ impl Guard {
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
-        let tol = self.options.constraint_tolerance;
+        let tol = self.options.newton.step_tolerance;
         let (qmax, pmax) = scales;
         let within = g.iter().zip(sizes).zip(reads).all(|((gi, si), &r)| {
             let scale = crate::validate::variable_scale(r, qmax, pmax);
-            gi.abs() <= crate::validate::constraint_bound(tol, *si, scale)
+            gi.abs() <= crate::validate::step_bound(tol, *si, scale)
         });
         if within {
             return Ok(());
         }
-        let (residual, _, bound) = crate::validate::worst_constraint(g, sizes, reads, scales, tol);
+        let (residual, _, bound) =
+            crate::validate::worst_constraint_by(g, sizes, reads, scales, |s, scale| {
+                crate::validate::step_bound(tol, s, scale)
+            });
         if !(residual <= bound) {
             return Err(StepError::NewtonNotConverged {
                 stage: Stage::Shake,
@@ -414,6 +436,35 @@ impl Guard {
         t: f64,
     ) -> Result<(), StepError> {
         self.after_projection(pr, h, step, t)?;
+        if ws.g_reads.iter().any(|&r| r != 1) {
+            // Π's fibre flow moves q as well when g reads p: the stored
+            // state must still be on M to round-off, as after a projected
+            // step (`after_shake`).
+            sys.constraints(q, p, &mut ws.g);
+            sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+            crate::validate::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
+            let scales = (max_abs(q, &[]), max_abs(&[], p));
+            self.on_m(
+                &ws.g,
+                &ws.g_size,
+                &ws.g_reads,
+                scales,
+                pr.iterations,
+                step,
+                t,
+            )
+            .map_err(|e| match e {
+                StepError::NewtonNotConverged {
+                    step, t, source, ..
+                } => StepError::NewtonNotConverged {
+                    stage: Stage::Rattle,
+                    step,
+                    t,
+                    source,
+                },
+                e => e,
+            })?;
+        }
         if self.options.check_component && sys.constraint_count() > 0 {
             let nd = check_nondegeneracy(sys, q, p, ws);
             self.component(&nd, step, t)?;

@@ -82,6 +82,10 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     /// λ of the first substep of the last composed step (kept only with
     /// diagnostics): the multiplier of the step leaving the state.
     pub(crate) lead_lambda: Vec<f64>,
+    /// The buffers of a composed step's reverse check (see
+    /// `step::reverse`), made before the first composed step that needs
+    /// them.
+    pub(crate) reverse: Option<crate::step::Reverse<B::Workspace>>,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -123,6 +127,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             checked_norm: f64::NAN,
             checked_det: f64::NAN,
             lead_lambda: vec![0.0; m],
+            reverse: None,
         }
     }
 
@@ -425,6 +430,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         if self.system.constraint_count() > 0 {
             // `start` factorised N at this q (the classical path reuses it).
             self.n_fresh = self.classical.is_some();
+        }
+        if self.reverse_checked() {
+            self.reverse_buffers();
         }
         Ok(())
     }

@@ -78,9 +78,11 @@ pub(crate) fn options(o: &Options) -> Result<(), StepError> {
             n.max_iterations as f64,
         ));
     }
-    if !(o.constraint_tolerance > 0.0 && o.constraint_tolerance.is_finite()) {
+    // Relative to g's own size: above 1 a state would pass with |g| larger
+    // than g itself, which no longer says "near M".
+    if !(o.constraint_tolerance > 0.0 && o.constraint_tolerance <= 1.0) {
         return Err(invalid(
-            "constraint_tolerance must be finite and positive",
+            "constraint_tolerance must be in (0, 1] (it is relative to the constraint's own size)",
             o.constraint_tolerance,
         ));
     }
@@ -90,6 +92,12 @@ pub(crate) fn options(o: &Options) -> Result<(), StepError> {
     }
     if !(o.jump_ratio >= 0.0) {
         return Err(invalid("jump_ratio must be non-negative", o.jump_ratio));
+    }
+    if !(o.reverse_tolerance >= 0.0) {
+        return Err(invalid(
+            "reverse_tolerance must be non-negative (infinity turns the check off)",
+            o.reverse_tolerance,
+        ));
     }
     Ok(())
 }
@@ -162,6 +170,19 @@ pub(crate) fn constraint_bound(tolerance: f64, size: f64, scale: f64) -> f64 {
     tolerance * half * half + 64.0 * f64::EPSILON * size * scale
 }
 
+/// The bound on |g_i| at the result of a step: its round-off,
+/// max(64ε, `newton_tolerance`) · s · scale, s = ‖∂g_i/∂z‖₁ and the scale
+/// of the variables g_i reads. A step solves g = 0 by Newton: the
+/// residual it leaves is the rounding of g's terms at the new state
+/// (ε·Σ_k |∂g_i/∂z_k| |z_k| ≤ ε·s·scale, with room for the rounding of
+/// the state itself and of the base map's stages), or what a Newton
+/// tolerance looser than round-off allows. Unlike the constraint
+/// tolerance, this does not depend on how far from M the run's initial
+/// data was allowed to be.
+pub(crate) fn step_bound(newton_tolerance: f64, size: f64, scale: f64) -> f64 {
+    (64.0 * f64::EPSILON).max(newton_tolerance) * size * scale
+}
+
 /// The constraint whose |g_i| exceeds its [`constraint_bound`] by the
 /// largest factor, as (|g_i|, i, that bound) (NaN the largest); the state
 /// is on M when |g_i| is within its bound.
@@ -169,13 +190,26 @@ pub(crate) fn worst_constraint(
     g: &[f64],
     sizes: &[f64],
     reads: &[u8],
-    (qmax, pmax): (f64, f64),
+    scales: (f64, f64),
     tolerance: f64,
+) -> (f64, usize, f64) {
+    worst_constraint_by(g, sizes, reads, scales, |s, scale| {
+        constraint_bound(tolerance, s, scale)
+    })
+}
+
+/// [`worst_constraint`] against any bound(s, scale).
+pub(crate) fn worst_constraint_by(
+    g: &[f64],
+    sizes: &[f64],
+    reads: &[u8],
+    (qmax, pmax): (f64, f64),
+    bound_of: impl Fn(f64, f64) -> f64,
 ) -> (f64, usize, f64) {
     let mut worst = (0.0, 0, 0.0);
     let mut worst_ratio = f64::NEG_INFINITY;
     for (i, gi) in g.iter().enumerate() {
-        let bound = constraint_bound(tolerance, sizes[i], variable_scale(reads[i], qmax, pmax));
+        let bound = bound_of(sizes[i], variable_scale(reads[i], qmax, pmax));
         let r = gi.abs();
         let ratio = match r / bound {
             x if x.is_nan() => f64::INFINITY,
@@ -261,11 +295,23 @@ mod tests {
                 ..d
             },
             Options {
+                constraint_tolerance: 1e300,
+                ..d
+            },
+            Options {
                 max_condition: f64::NAN,
                 ..d
             },
             Options {
                 jump_ratio: -0.5,
+                ..d
+            },
+            Options {
+                reverse_tolerance: f64::NAN,
+                ..d
+            },
+            Options {
+                reverse_tolerance: -1e-6,
                 ..d
             },
             Options {
@@ -296,5 +342,11 @@ mod tests {
                 "{o:?}"
             );
         }
+        // ∞ turns the reverse check off, as documented.
+        let off = Options {
+            reverse_tolerance: f64::INFINITY,
+            ..d
+        };
+        assert!(options(&off).is_ok());
     }
 }

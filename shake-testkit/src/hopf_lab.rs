@@ -676,6 +676,7 @@ impl FoldRun {
                     | StepError::SingularShakeJacobian { .. }
                     | StepError::ComponentJump { .. }
                     | StepError::FibreJump { .. }
+                    | StepError::BranchJump { .. }
                     | StepError::NewtonNotConverged { .. }
             )
         )

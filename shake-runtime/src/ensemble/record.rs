@@ -289,6 +289,20 @@ fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             pack_str(constraint, w);
             pack_solve(cause, w);
         }
+        StepError::BranchJump {
+            step,
+            t,
+            miss,
+            tolerance,
+            ref cause,
+        } => {
+            // The step back's own error, if any, follows (it is never a
+            // branch jump itself: the step back is not checked by stepping
+            // back).
+            let (has, miss) = miss.map_or((0, 0.0), |m| (1, m));
+            w.extend([10, step, b(t), has, b(miss), b(tolerance)]);
+            pack_error(cause.as_deref(), w);
+        }
     }
 }
 
@@ -395,6 +409,17 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
             constraint: r.string()?.to_string(),
             cause: unpack_solve(r)?,
         },
+        10 => {
+            let (step, t, has, miss, tolerance) =
+                (r.word()?, r.float()?, r.word()?, r.float()?, r.float()?);
+            StepError::BranchJump {
+                step,
+                t,
+                miss: (has == 1).then_some(miss),
+                tolerance,
+                cause: unpack_error(r)?.map(Box::new),
+            }
+        }
         k => {
             return Err(RecordError::Corrupted {
                 what: "error variant",

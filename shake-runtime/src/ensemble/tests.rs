@@ -122,6 +122,26 @@ fn every_error_round_trips() {
             step: 2,
             t: 0.1,
         },
+        StepError::BranchJump {
+            step: 12,
+            t: 0.6,
+            miss: Some(0.86),
+            tolerance: 1e-6,
+            cause: None,
+        },
+        StepError::BranchJump {
+            step: 13,
+            t: 0.65,
+            miss: None,
+            tolerance: 2e-6,
+            cause: Some(Box::new(StepError::FibreJump {
+                stage: Stage::Rattle,
+                step: 13,
+                t: 0.65,
+                lambda: 0.5,
+                predicted: 1e-2,
+            })),
+        },
     ];
     for e in errors {
         out.error = Some(e.clone());

@@ -133,6 +133,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     let mut need_jacobian = true;
     let mut refreshes = 0;
     let mut prev_step = f64::INFINITY;
+    let (mut polish, mut polish_from) = (2, f64::INFINITY);
     loop {
         let r = norm_inf(&ws.g);
         if !r.is_finite() || !ws.z1.iter().all(|x| x.is_finite()) {
@@ -143,8 +144,22 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
                 },
             ));
         }
-        if converged || r == 0.0 {
+        if r == 0.0 {
             break;
+        }
+        if converged {
+            // Newton stopped on its update. Where g is not yet at its
+            // round-off (an ill-conditioned λ, a stale or difference
+            // Jacobian at the noise floor of λ) up to two more iterations
+            // with a fresh Jacobian are spent, each only while it lowers
+            // the residual; the guard refuses what is still above it.
+            if polish == 0 || !(r < polish_from) || residual_at_roundoff(sys, ws) {
+                break;
+            }
+            polish -= 1;
+            polish_from = r;
+            converged = false;
+            need_jacobian = true;
         }
         if mon.exhausted() {
             return Err(StepError::from_solve(
@@ -232,6 +247,20 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
             .fold(0.0f64, |e, (a, b)| e.max((a - b).abs()));
     }
     Ok(report)
+}
+
+/// Every |g_i(z1⁻)| (in `ws.g`) within 16ε Σ_k |∂g_i/∂z_k| |z_k| at z1⁻:
+/// what rounding z1⁻ and g's terms leaves, below which no update can go.
+/// (Evaluates g_z at z1⁻ into `ws.g_z_1`.)
+fn residual_at_roundoff<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> bool {
+    let (d, m) = (ws.d, ws.m);
+    sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
+    (0..m).all(|i| {
+        let floor: f64 = (0..2 * d)
+            .map(|k| (ws.g_z_1[i + k * m] * ws.z1[k]).abs())
+            .sum();
+        ws.g[i].abs() <= 16.0 * f64::EPSILON * floor
+    })
 }
 
 /// z ← z + Δ: plainly, or with Kahan's compensation when a run keeps a carry.

@@ -5,13 +5,17 @@
 //! - `shake`: one SHAKE substep, on the general path (the
 //!   Newton iteration on λ of `crate::shake`) or the classical one
 //!   (`crate::classical`), followed by Π for RATTLE;
+//! - `reverse`: the check of a composed step by stepping back with −h;
 //! - this file: the composition of substeps γ_k h that makes one step.
 //!
 //! A step map only computes; every check on its result is the
 //! [`guard`](crate::guard)'s, and the run around it (stride, storage,
 //! observers) is the [`run`](crate::run) driver's.
 
+mod reverse;
 mod shake;
+
+pub(crate) use reverse::Reverse;
 
 use crate::base_map::BaseMap;
 use crate::error::StepError;
@@ -95,6 +99,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             return self.substep(q, p, self.h, project, step, t);
         }
         let last = gammas.len() - 1;
+        let reverse = self.reverse_checked();
+        if reverse {
+            self.keep_start(q, p);
+        }
         let mut total = StepInfo::default();
         for (k, &gamma) in gammas.iter().enumerate() {
             let info = self.substep(q, p, gamma * self.h, project || k < last, step, t)?;
@@ -108,6 +116,13 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             total.condition = total.condition.max(info.condition);
             total.fold = total.fold.max(info.fold);
             total.det_n = info.det_n;
+        }
+        if reverse {
+            // Inside a run with every step projected the start is on M^H;
+            // elsewhere (a lazy run, SHAKE, a single step from a state of
+            // the caller's) the step back returns Π of it.
+            let start_on_mh = project && self.carrying;
+            self.reverse(q, p, project, start_on_mh, step, t)?;
         }
         Ok(total)
     }

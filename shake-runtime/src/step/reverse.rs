@@ -1,0 +1,179 @@
+//! The reverse-step check of a composed step (Section 4): take the step
+//! back with −h and compare with where it started.
+//!
+//! Over a symmetric base map each substep is symmetric: S_{−γh} ∘ S_{γh} =
+//! id on M and R_{−γh} ∘ R_{γh} = id on M^H (the paper's Theorem on the
+//! symmetry of SHAKE and RATTLE). A composed step Ψ_h = Φ_{γ_s h} ∘ … ∘
+//! Φ_{γ_1 h} is undone by the substeps in reverse order with −γ_k h, each
+//! projected onto M^H exactly when its forward substep was. Since R_{γh}
+//! only sees the fibre of its argument (R_{γh}(z) = R_{γh}(Π z)), the
+//! step back from a start z₀ that is on M but not on M^H (a lazily
+//! projected run, SHAKE) returns Π z₀: that is what it is compared with.
+//!
+//! A substep that converged to another solution than the nearby one (a
+//! branch jump: another crossing of a fibre with M or M^H) is a solution
+//! of the same symmetric equations, but the step back, started at λ = 0,
+//! finds the nearby solution from the new state, and that one does not
+//! lead back. Near a fold of M^H where N is small, such a jump can keep
+//! det N's sign and λ near its first prediction, so no other check sees it
+//! (`tests/hard_degenerate.rs`, `tests/hard_random_systems.rs`).
+//!
+//! The step back runs on its own workspaces and a copy of the guard, so the
+//! forward step's state (N at the new state, the Kahan carry, the factors
+//! the classical path keeps) is untouched. Its substeps are held only to
+//! convergence (finite, on M to round-off): the fibre-jump, component and
+//! condition tests are the forward step's, and the miss is the verdict.
+
+use crate::base_map::BaseMap;
+use crate::error::StepError;
+use crate::guard::max_abs;
+use crate::integrator::Integrator;
+use crate::rattle::project_hidden;
+use crate::shake::Workspace;
+use crate::system::ConstrainedSystem;
+
+/// The buffers of the step back: its own workspaces and the two states.
+#[derive(Clone, Debug)]
+pub(crate) struct Reverse<W> {
+    ws: Workspace,
+    base_ws: W,
+    /// The step's start (q, p), then (if it was not on M^H) Π of it.
+    start_q: Vec<f64>,
+    start_p: Vec<f64>,
+    /// The state stepped back.
+    back_q: Vec<f64>,
+    back_p: Vec<f64>,
+}
+
+impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// Whether composed steps are checked by stepping back: a composition
+    /// over a symmetric base map, constraints, and a finite tolerance.
+    pub(crate) fn reverse_checked(&self) -> bool {
+        self.composition.stages() > 1
+            && B::SYMMETRIC
+            && self.system.constraint_count() > 0
+            && self.guard.options.reverse_tolerance.is_finite()
+    }
+
+    /// Allocates the step back's buffers (once per integrator, before the
+    /// first step that needs them).
+    pub(crate) fn reverse_buffers(&mut self) -> &mut Reverse<B::Workspace> {
+        let d = self.system.dof();
+        self.reverse.get_or_insert_with(|| Reverse {
+            ws: Workspace::new(&self.system),
+            base_ws: self.base.workspace(d),
+            start_q: vec![0.0; d],
+            start_p: vec![0.0; d],
+            back_q: vec![0.0; d],
+            back_p: vec![0.0; d],
+        })
+    }
+
+    /// Keeps the start of a composed step for [`reverse`](Self::reverse).
+    pub(crate) fn keep_start(&mut self, q: &[f64], p: &[f64]) {
+        let rev = self.reverse_buffers();
+        rev.start_q.copy_from_slice(q);
+        rev.start_p.copy_from_slice(p);
+    }
+
+    /// The check: the composed step from the kept start to (q, p), taken
+    /// back with −h, must land within `Options::reverse_tolerance` · max(‖z₀‖∞,
+    /// ‖z₁‖∞) of the start (of Π of it when `start_on_mh` is false).
+    /// `project` is the forward step's: whether its last substep was
+    /// projected.
+    pub(crate) fn reverse(
+        &mut self,
+        q: &[f64],
+        p: &[f64],
+        project: bool,
+        start_on_mh: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        let Some(mut rev) = self.reverse.take() else {
+            return Ok(());
+        };
+        // The step back runs in its own workspaces, with a copy of the
+        // guard that knows N at the new state, and no Kahan carry.
+        std::mem::swap(&mut self.ws, &mut rev.ws);
+        std::mem::swap(&mut self.base_ws, &mut rev.base_ws);
+        self.ws.n_prev.copy_from_slice(&rev.ws.n_prev);
+        self.ws.lambda_scale = rev.ws.lambda_scale;
+        let guard = self.guard.clone();
+        // The step back is judged by where it lands, not by the checks of
+        // a forward step: its λ at tiny h is round-off against round-off
+        // (the fibre-jump test would refuse noise), and a jump of its own
+        // shows in the miss. Only its solves must converge.
+        self.guard.options.jump_ratio = f64::INFINITY;
+        self.guard.options.check_component = false;
+        self.guard.options.max_condition = f64::INFINITY;
+        let (carrying, n_fresh) = (self.carrying, self.n_fresh);
+        self.carrying = false;
+        let outcome = self.step_back(&mut rev, q, p, project, start_on_mh, step, t);
+        std::mem::swap(&mut self.ws, &mut rev.ws);
+        std::mem::swap(&mut self.base_ws, &mut rev.base_ws);
+        self.guard = guard;
+        (self.carrying, self.n_fresh) = (carrying, n_fresh);
+        self.reverse = Some(rev);
+        outcome
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn step_back(
+        &mut self,
+        rev: &mut Reverse<B::Workspace>,
+        q: &[f64],
+        p: &[f64],
+        project: bool,
+        start_on_mh: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
+        let gammas = self.composition.coefficients();
+        let last = gammas.len() - 1;
+        let tolerance = self.guard.options.reverse_tolerance
+            * max_abs(&rev.start_q, &rev.start_p).max(max_abs(q, p));
+        let jump = |miss: Option<f64>, cause: Option<StepError>| StepError::BranchJump {
+            step,
+            t,
+            miss,
+            tolerance,
+            cause: cause.map(Box::new),
+        };
+        if !start_on_mh {
+            let newton = *self.guard.newton();
+            project_hidden(
+                &self.system,
+                &mut rev.start_q,
+                &mut rev.start_p,
+                &mut self.ws,
+                &newton,
+            )
+            .map_err(|e| jump(None, Some(e.at(step, t))))?;
+        }
+        rev.back_q.copy_from_slice(q);
+        rev.back_p.copy_from_slice(p);
+        for (k, &gamma) in gammas.iter().enumerate().rev() {
+            self.substep(
+                &mut rev.back_q,
+                &mut rev.back_p,
+                -gamma * self.h,
+                project || k < last,
+                step,
+                t,
+            )
+            .map_err(|e| jump(None, Some(e)))?;
+        }
+        let miss = rev
+            .back_q
+            .iter()
+            .chain(&rev.back_p)
+            .zip(rev.start_q.iter().chain(&rev.start_p))
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        if miss <= tolerance {
+            Ok(())
+        } else {
+            Err(jump(Some(miss), None))
+        }
+    }
+}
