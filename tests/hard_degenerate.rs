@@ -401,3 +401,25 @@ fn the_fold_indicator_is_h_over_the_time_left_before_n_is_singular() {
         assert!(last >= 0.25, "h = {h}: {last}");
     }
 }
+
+/// Initial data off M within a loose `constraint_tolerance` is not a branch
+/// jump: the step back lands on M, about the start's distance from it away,
+/// and the reverse check allows for that distance (review of the check).
+#[test]
+fn a_start_off_m_within_the_tolerance_is_not_a_branch_jump() {
+    use shake::examples::Pendulum;
+    let opts = Options {
+        constraint_tolerance: 1e-3,
+        ..Options::default()
+    };
+    let z0 = State::from_slices(&[0.6 * 1.0001, -0.8 * 1.0001], &[0.8, 0.6]);
+    for c in [Composition::TRIPLE_JUMP, Composition::YOSHIDA_6] {
+        let mut integ = Integrator::new(Pendulum::default(), shake::StormerVerlet, 0.01)
+            .composed(c)
+            .with_options(opts);
+        let z1 = integ.step(&z0);
+        assert!(z1.is_ok(), "{c:?}: {z1:?}");
+        let out = integ.run(z0.clone(), Stop::Steps(50)).execute();
+        assert!(out.error.is_none(), "{c:?}: {:?}", out.error);
+    }
+}

@@ -8,7 +8,8 @@ mod common;
 use common::alloc::{allocations, Counting};
 use common::models::*;
 use shake::{
-    BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet, SymplecticEuler,
+    BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet,
+    SymplecticEuler,
 };
 
 #[global_allocator]
@@ -66,4 +67,37 @@ fn steps_do_not_allocate() {
     every_base("Hopf", Hopf::gravity(), hopf.clone());
     every_base("Hopf, expm", NoClosedForm(Hopf::gravity()), hopf.clone());
     every_base("Hopf, GBS", AsGeneral(Hopf::gravity()), hopf);
+}
+
+/// A composed step with its reverse check (`Options::reverse_tolerance`,
+/// a second workspace made once, at the first step) allocates nothing per
+/// step either.
+#[test]
+fn composed_steps_with_the_reverse_check_do_not_allocate() {
+    let hopf = State::from_slices(
+        &[-0.78652612, -0.4043988],
+        &[-0.3880746864163783, 0.2173391755798215],
+    );
+    let count = |integ: &mut Integrator<Hopf, ImplicitMidpoint>| {
+        let mut z = integ.project_to_hidden(&hopf).unwrap();
+        integ.step_in_place(&mut z).unwrap();
+        let before = allocations();
+        for _ in 0..100 {
+            integ.step_in_place(&mut z).unwrap();
+        }
+        allocations() - before
+    };
+    let mut integ =
+        Integrator::new(Hopf::gravity(), ImplicitMidpoint, 0.01).composed(Composition::TRIPLE_JUMP);
+    assert!(integ.options().reverse_tolerance.is_finite());
+    assert_eq!(count(&mut integ), 0);
+    let mut pendulum =
+        Integrator::new(Pendulum::default(), StormerVerlet, 0.01).composed(Composition::YOSHIDA_6);
+    let mut z = Pendulum::default().state(1.0, 0.5);
+    pendulum.step_in_place(&mut z).unwrap();
+    let before = allocations();
+    for _ in 0..100 {
+        pendulum.step_in_place(&mut z).unwrap();
+    }
+    assert_eq!(allocations() - before, 0);
 }

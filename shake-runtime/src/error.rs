@@ -136,7 +136,7 @@ fn reverse_outcome(miss: Option<f64>, tolerance: f64, cause: Option<&StepError>)
             sci(tolerance)
         ),
         (None, Some(cause)) => format!(
-            "the composed step taken back with −h fails ({cause}): a substep may have landed on another solution branch"
+            "the composed step could not be taken back with −h to check it ({cause}): a substep may have landed on another solution branch"
         ),
         (None, None) => "the composed step taken back with −h does not return".to_string(),
     }
@@ -270,14 +270,14 @@ pub enum StepError {
         predicted: f64,
     },
     /// A composed step (Section 4) is not undone by the same composition
-    /// with −h. Each substep is symmetric (S_{−h} ∘ S_h = id, R_{−h} ∘ R_h =
-    /// id on M^H), so a step that followed the nearby solution branch comes
-    /// back to its start to round-off; one whose substep landed on another
-    /// crossing of a fibre with M or M^H does not, even when every other
-    /// check passes (N keeps its sign and λ its first prediction when N is
-    /// small or flat along the fibre). `miss` is ‖back − start‖∞ (start
-    /// projected onto M^H when it was not on it), `None` when the step back
-    /// itself failed (`cause`). See
+    /// with −h. RATTLE over a symmetric base map is symmetric (R_{−h} ∘ R_h
+    /// = id on M^H), so a step that followed the nearby solution branch
+    /// comes back to its start to round-off; one whose substep landed on
+    /// another crossing of a fibre with M or M^H does not, even when every
+    /// other check passes (N keeps its sign and λ its first prediction when
+    /// N is small or flat along the fibre). `miss` is ‖back − start‖∞
+    /// (start projected onto M^H when it was not on it), `None` when the
+    /// step back, or the projection of the start, failed (`cause`). See
     /// [`Options::reverse_tolerance`](crate::Options::reverse_tolerance).
     #[error("branch jump at step {step}, t = {}: {}", human(*.t), reverse_outcome(*.miss, *.tolerance, .cause.as_deref()))]
     BranchJump {

@@ -5,10 +5,11 @@
 //! whether its result may be kept. The checks, in the order they run:
 //!
 //! - **finite**: no NaN or infinity in the new state;
-//! - **on M**: |g_i(z1)| within [`Options::constraint_tolerance`] relative
-//!   to g_i's scale (SHAKE's Newton
-//!   stops on the size of its updates, so far outside its basin it can stop
-//!   off M);
+//! - **on M**: |g_i(z1)| at its round-off, max(64ε, Newton's step
+//!   tolerance) · ‖∂g_i/∂z‖₁ · ‖z‖ (SHAKE's Newton stops on the size of
+//!   its updates, so far outside its basin or with an ill-conditioned λ it
+//!   can stop short of M; [`Options::constraint_tolerance`] is for the
+//!   data a run starts from);
 //! - **nondegeneracy** (the paper's Assumption 1.1): the condition of
 //!   N_ij = {{H,g_i},g_j} relative to its size at the start stays below
 //!   [`Options::max_condition`];
@@ -60,7 +61,9 @@ pub struct Options {
     /// |g_i| ≤ max(64ε, `newton.step_tolerance`) · s_i · ‖z‖ with s_i
     /// measured in that step, else [`StepError::NewtonNotConverged`] in
     /// [`Stage::Shake`] (SHAKE's Newton stopped short of its root: an
-    /// ill-conditioned λ or an absurd h).
+    /// ill-conditioned λ or an absurd h), or in [`Stage::Rattle`] for a
+    /// state projected onto M^H only when a lazy run stores it (Π's fibre
+    /// flow moves q when g reads p).
     pub constraint_tolerance: f64,
     /// After every step N is evaluated at the new state; the step fails with
     /// [`StepError::NondegeneracyLost`] when max(‖N‖₁, ‖N₀‖₁) · ‖N⁻¹‖₁ exceeds
@@ -261,7 +264,7 @@ impl Guard {
     }
 
     /// Every check after a SHAKE (sub)step, the same on both paths: g(z1)
-    /// within the constraint tolerance, N's condition and the sign of det N,
+    /// at its round-off ([`on_m`](Self::on_m)), N's condition and the sign of det N,
     /// and λ against its linear prediction. `ws.g` holds g at the new state;
     /// `info` receives N's condition and determinant.
     #[allow(clippy::too_many_arguments)]

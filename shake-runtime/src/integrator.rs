@@ -32,7 +32,10 @@ pub use crate::step::{Method, StepInfo};
 pub use crate::trajectory::Trajectory;
 
 /// Geometric SHAKE or RATTLE for a system `S` over a base map `B` with step
-/// size h. All buffers are allocated here; a step allocates nothing.
+/// size h. All buffers are allocated here, except the second workspace of
+/// a composed step's reverse check ([`Options::reverse_tolerance`]), made
+/// when the first composed run or step begins (it doubles the workspace's
+/// memory); a step allocates nothing.
 ///
 /// ```
 /// use shake_runtime::{Integrator, ImplicitMidpoint, State, examples::Pendulum};
@@ -483,6 +486,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             self.checked[d..].copy_from_slice(&p);
             self.checked_valid = true;
             (self.checked_norm, self.checked_det) = self.guard.last();
+        } else {
+            // The guard now describes the refused state: a retry from z
+            // must start afresh (`begin`), not resume from it.
+            self.checked_valid = false;
         }
         self.out_q = q;
         self.out_p = p;

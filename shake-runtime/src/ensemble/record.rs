@@ -340,8 +340,21 @@ fn unpack_solve(r: &mut Reader) -> Result<Option<SolveError>, RecordError> {
 }
 
 fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
+    unpack_error_in(r, false)
+}
+
+/// `in_cause`: this error is a branch jump's cause, which is never a
+/// branch jump itself (the step back is not stepped back); refusing one
+/// there keeps a corrupt record from recursing without end.
+fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, RecordError> {
     let e = match r.word()? {
         0 => return Ok(None),
+        10 if in_cause => {
+            return Err(RecordError::Corrupted {
+                what: "branch jump's cause",
+                value: 10,
+            })
+        }
         1 => {
             let value = r.float()?;
             StepError::InvalidInput {
@@ -412,12 +425,19 @@ fn unpack_error(r: &mut Reader) -> Result<Option<StepError>, RecordError> {
         10 => {
             let (step, t, has, miss, tolerance) =
                 (r.word()?, r.float()?, r.word()?, r.float()?, r.float()?);
+            if has > 1 {
+                return Err(RecordError::Corrupted {
+                    what: "branch jump's miss flag",
+                    value: has,
+                });
+            }
+            let cause = unpack_error_in(r, true)?;
             StepError::BranchJump {
                 step,
                 t,
                 miss: (has == 1).then_some(miss),
                 tolerance,
-                cause: unpack_error(r)?.map(Box::new),
+                cause: cause.map(Box::new),
             }
         }
         k => {

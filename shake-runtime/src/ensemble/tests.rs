@@ -143,6 +143,22 @@ fn every_error_round_trips() {
             })),
         },
     ];
+    // A branch jump whose cause is a branch jump never comes out of a run;
+    // read from a corrupt record it is an error, not a deep recursion.
+    out.error = Some(StepError::BranchJump {
+        step: 1,
+        t: 0.1,
+        miss: None,
+        tolerance: 1e-6,
+        cause: Some(Box::new(StepError::BranchJump {
+            step: 1,
+            t: 0.1,
+            miss: Some(1.0),
+            tolerance: 1e-6,
+            cause: None,
+        })),
+    });
+    assert!(unpack_outcome(&bits(11, &out)).is_err());
     for e in errors {
         out.error = Some(e.clone());
         let w = bits(11, &out);

@@ -133,7 +133,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     let mut need_jacobian = true;
     let mut refreshes = 0;
     let mut prev_step = f64::INFINITY;
-    let (mut polish, mut polish_from) = (2, f64::INFINITY);
+    let (mut polish, mut polish_from, mut polishing) = (2, f64::INFINITY, false);
     loop {
         let r = norm_inf(&ws.g);
         if !r.is_finite() || !ws.z1.iter().all(|x| x.is_finite()) {
@@ -151,13 +151,20 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
             // Newton stopped on its update. Where g is not yet at its
             // round-off (an ill-conditioned λ, a stale or difference
             // Jacobian at the noise floor of λ) up to two more iterations
-            // with a fresh Jacobian are spent, each only while it lowers
-            // the residual; the guard refuses what is still above it.
-            if polish == 0 || !(r < polish_from) || residual_at_roundoff(sys, ws) {
+            // with a fresh Jacobian are spent; one that does not lower the
+            // residual is undone. The guard refuses what is still above
+            // the round-off bound.
+            if polishing && !(r < polish_from) {
+                keep_iterate(ws, false);
                 break;
             }
+            if polish == 0 || residual_at_roundoff(sys, ws) {
+                break;
+            }
+            keep_iterate(ws, true);
             polish -= 1;
             polish_from = r;
+            polishing = true;
             converged = false;
             need_jacobian = true;
         }
@@ -226,7 +233,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
             // keeps that path; the Jacobian stays compressed.
             converged = mon.update(step, size) == Verdict::Converged;
             need_jacobian = true;
-            if step > 0.25 * prev_step && ws.groups < m {
+            if step > 0.25 * prev_step && ws.groups < m && !polishing {
                 // Slow for Newton: the band missed O(h²) couplings.
                 refreshes = 2;
             }
@@ -251,16 +258,40 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
 
 /// Every |g_i(z1⁻)| (in `ws.g`) within 16ε Σ_k |∂g_i/∂z_k| |z_k| at z1⁻:
 /// what rounding z1⁻ and g's terms leaves, below which no update can go.
-/// (Evaluates g_z at z1⁻ into `ws.g_z_1`.)
+/// (Evaluates g_z at z1⁻ into `ws.g_z_1`, sums over its pattern only into
+/// `ws.g_size`, which the caller recomputes after the step.)
 fn residual_at_roundoff<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> bool {
     let (d, m) = (ws.d, ws.m);
     sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
-    (0..m).all(|i| {
-        let floor: f64 = (0..2 * d)
-            .map(|k| (ws.g_z_1[i + k * m] * ws.z1[k]).abs())
-            .sum();
-        ws.g[i].abs() <= 16.0 * f64::EPSILON * floor
-    })
+    ws.g_size.fill(0.0);
+    for &(i, k) in &ws.pattern {
+        if i < m && k < 2 * d {
+            ws.g_size[i] += (ws.g_z_1[i + k * m] * ws.z1[k]).abs();
+        }
+    }
+    ws.g.iter()
+        .zip(&ws.g_size)
+        .all(|(g, floor)| g.abs() <= 16.0 * f64::EPSILON * floor)
+}
+
+/// Keeps (`save`) or brings back SHAKE's iterate: λ, z1⁻, Δ and g.
+fn keep_iterate(ws: &mut Workspace, save: bool) {
+    let (m, n) = (ws.m, 2 * ws.d);
+    let keep = &mut ws.polish_keep;
+    let parts: [(&mut Vec<f64>, usize); 4] = [
+        (&mut ws.lambda, 0),
+        (&mut ws.z1, m),
+        (&mut ws.dz, m + n),
+        (&mut ws.g, m + 2 * n),
+    ];
+    for (v, at) in parts {
+        let slot = &mut keep[at..at + v.len()];
+        if save {
+            slot.copy_from_slice(v);
+        } else {
+            v.copy_from_slice(slot);
+        }
+    }
 }
 
 /// z ← z + Δ: plainly, or with Kahan's compensation when a run keeps a carry.

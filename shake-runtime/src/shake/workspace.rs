@@ -79,6 +79,9 @@ pub(crate) struct Workspace {
     /// ‖∂g_i/∂z‖₁ where it was last measured (the state being checked, or
     /// the start of the step): the scale of the constraint tolerance.
     pub(crate) g_size: Vec<f64>,
+    /// SHAKE's iterate (λ, z1⁻, Δ, g) before an extra iteration at the
+    /// noise floor, to go back to when that iteration does not lower g.
+    pub(crate) polish_keep: Vec<f64>,
     /// Which half of z each g_i reads (`validate::reads`).
     pub(crate) g_reads: Vec<u8>,
     pub(crate) cl_col_start: Vec<usize>,
@@ -168,6 +171,7 @@ impl Workspace {
                 .collect(),
             cl_mass: diagonal_mass(sys),
             g_size: vec![0.0; m],
+            polish_keep: vec![0.0; 2 * m + 2 * n],
             g_reads: crate::validate::reads(sys.jacobian_pattern(), d, m),
             cl_col_start: column_starts(sys, d, m),
             cl_col_rows: column_rows(sys, d, m),

@@ -1,14 +1,18 @@
 //! The reverse-step check of a composed step (Section 4): take the step
 //! back with −h and compare with where it started.
 //!
-//! Over a symmetric base map each substep is symmetric: S_{−γh} ∘ S_{γh} =
-//! id on M and R_{−γh} ∘ R_{γh} = id on M^H (the paper's Theorem on the
-//! symmetry of SHAKE and RATTLE). A composed step Ψ_h = Φ_{γ_s h} ∘ … ∘
-//! Φ_{γ_1 h} is undone by the substeps in reverse order with −γ_k h, each
-//! projected onto M^H exactly when its forward substep was. Since R_{γh}
-//! only sees the fibre of its argument (R_{γh}(z) = R_{γh}(Π z)), the
-//! step back from a start z₀ that is on M but not on M^H (a lazily
-//! projected run, SHAKE) returns Π z₀: that is what it is compared with.
+//! Over a symmetric base map RATTLE is symmetric: R_{−γh} ∘ R_{γh} = id on
+//! M^H (the paper's Section on time reversibility). SHAKE is not (S_{−h}
+//! does not preserve M^{H,h}): S_{−γh} ∘ S_{γh} only returns to the
+//! start's fibre. A composed step Ψ_h = Φ_{γ_s h} ∘ … ∘ Φ_{γ_1 h} (every
+//! substep but possibly the last projected, so Φ = R there) is undone by
+//! the substeps in reverse order with −γ_k h, each projected exactly when
+//! its forward substep was. A last substep that was a SHAKE step is undone
+//! up to the fibre, which the next substep back, a RATTLE step, does not
+//! see (R_{γh}(z) = R_{γh}(Π z)): with at least two stages the first
+//! substep back is always followed by a projected one. For the same reason
+//! the step back from a start z₀ on M but not on M^H (a lazily projected
+//! run, SHAKE) returns Π z₀: that is what it is compared with.
 //!
 //! A substep that converged to another solution than the nearby one (a
 //! branch jump: another crossing of a fibre with M or M^H) is a solution
@@ -43,6 +47,8 @@ pub(crate) struct Reverse<W> {
     /// The state stepped back.
     back_q: Vec<f64>,
     back_p: Vec<f64>,
+    /// An estimate of the start's distance from M (see `keep_start`).
+    start_off: f64,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -66,14 +72,34 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             start_p: vec![0.0; d],
             back_q: vec![0.0; d],
             back_p: vec![0.0; d],
+            start_off: 0.0,
         })
     }
 
-    /// Keeps the start of a composed step for [`reverse`](Self::reverse).
+    /// Keeps the start of a composed step for [`reverse`](Self::reverse),
+    /// and how far off M it is: a start that the constraint tolerance let
+    /// through off M (initial data) is not returned to by the step back,
+    /// whose states are on M; it lands about that distance away,
+    /// √(2d) · max_i |g_i| / ‖∂g_i/∂z‖₁ ≥ |g_i| / ‖∇g_i‖₂.
     pub(crate) fn keep_start(&mut self, q: &[f64], p: &[f64]) {
-        let rev = self.reverse_buffers();
+        self.reverse_buffers();
+        let (sys, d) = (&self.system, self.system.dof());
+        let Some(rev) = self.reverse.as_mut() else {
+            return;
+        };
         rev.start_q.copy_from_slice(q);
         rev.start_p.copy_from_slice(p);
+        sys.constraints(q, p, &mut rev.ws.g);
+        sys.constraint_jacobian(q, p, &mut rev.ws.g_z_1);
+        crate::validate::gradient_sizes(&rev.ws.pattern, &rev.ws.g_z_1, &mut rev.ws.g_size);
+        rev.start_off = rev
+            .ws
+            .g
+            .iter()
+            .zip(&rev.ws.g_size)
+            .map(|(g, s)| if *g == 0.0 { 0.0 } else { g.abs() / s })
+            .fold(0.0f64, f64::max)
+            * ((2 * d) as f64).sqrt();
     }
 
     /// The check: the composed step from the kept start to (q, p), taken
@@ -109,13 +135,17 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         self.guard.options.max_condition = f64::INFINITY;
         let (carrying, n_fresh) = (self.carrying, self.n_fresh);
         self.carrying = false;
-        let outcome = self.step_back(&mut rev, q, p, project, start_on_mh, step, t);
+        // A system that panics inside the step back must not leave the
+        // integrator with the spare workspace and the loosened checks.
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            self.step_back(&mut rev, q, p, project, start_on_mh, step, t)
+        }));
         std::mem::swap(&mut self.ws, &mut rev.ws);
         std::mem::swap(&mut self.base_ws, &mut rev.base_ws);
         self.guard = guard;
         (self.carrying, self.n_fresh) = (carrying, n_fresh);
         self.reverse = Some(rev);
-        outcome
+        outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic))
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -131,8 +161,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     ) -> Result<(), StepError> {
         let gammas = self.composition.coefficients();
         let last = gammas.len() - 1;
+        // Relative to the state's size, plus four times the start's
+        // distance from M (zero after the first step of a run: every
+        // step's result is on M to round-off).
         let tolerance = self.guard.options.reverse_tolerance
-            * max_abs(&rev.start_q, &rev.start_p).max(max_abs(q, p));
+            * max_abs(&rev.start_q, &rev.start_p).max(max_abs(q, p))
+            + 4.0 * rev.start_off;
         let jump = |miss: Option<f64>, cause: Option<StepError>| StepError::BranchJump {
             step,
             t,
@@ -140,6 +174,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             tolerance,
             cause: cause.map(Box::new),
         };
+        debug_assert!(gammas.len() >= 2, "only composed steps are stepped back");
         if !start_on_mh {
             let newton = *self.guard.newton();
             project_hidden(
