@@ -100,8 +100,10 @@ pub struct Options {
     /// fibre misses by the distance between the crossings. This is the one
     /// check that sees such a jump when N keeps its sign and λ stays near
     /// its first prediction (Section 5.4.2; `tests/hard_degenerate.rs`).
-    /// It doubles the cost of a composed step; `f64::INFINITY` turns it
-    /// off. Single steps are not checked this way.
+    /// It makes a composed step 1.8–2.8 times as costly (the step back,
+    /// and in a lazily projected run Π of the start; BENCHMARKS.md,
+    /// section 7.2); `f64::INFINITY` turns it off. Single steps are not
+    /// checked this way.
     pub reverse_tolerance: f64,
 }
 
