@@ -341,6 +341,18 @@ fn a_composed_step_that_bounces_off_the_fold_is_refused_by_stepping_back() {
         "stopped early at t = {t_last}, t_s = {t_s}"
     );
     assert!(e.to_string().contains("branch jump"), "{e}");
+    // From t0 = 0.5 the same run fails at the same step k, at t0 + k·h.
+    let t0 = 0.5;
+    let shifted = Integrator::new(sys, ImplicitMidpoint, h)
+        .composed(Composition::TRIPLE_JUMP)
+        .run(z0.clone(), Stop::Time(20.0 + t0))
+        .start_time(t0)
+        .execute();
+    let e2 = shifted.error.expect("the shifted run stops too");
+    assert!(matches!(e2, StepError::BranchJump { .. }), "{e2:?}");
+    assert_eq!(e2.step(), k);
+    assert_eq!(e2.time(), Some(t0 + k as f64 * h));
+    assert_eq!(*shifted.trajectory.steps().last().unwrap(), k - 1);
 }
 
 /// `StepInfo::fold` = ‖N₁ − N₀‖‖N₁⁻¹‖ is h over the time left before N
