@@ -100,7 +100,7 @@ pub struct Options {
     /// fibre misses by the distance between the crossings. This is the one
     /// check that sees such a jump when N keeps its sign and λ stays near
     /// its first prediction (Section 5.4.2; `tests/hard_degenerate.rs`).
-    /// It makes a composed step 1.8–2.8 times as costly (the step back,
+    /// It makes a composed step 1.8–3.4 times as costly (the step back,
     /// and in a lazily projected run Π of the start; BENCHMARKS.md,
     /// section 7.2); `f64::INFINITY` turns it off. Single steps are not
     /// checked this way.
@@ -285,6 +285,7 @@ impl Guard {
     ) -> Result<(), StepError> {
         let scales = (max_abs(q, &[]), max_abs(&[], p));
         self.on_m(
+            Stage::Shake,
             &ws.g,
             &ws.g_size,
             &ws.g_reads,
@@ -344,6 +345,7 @@ impl Guard {
     #[inline]
     pub(crate) fn on_m(
         &self,
+        stage: Stage,
         g: &[f64],
         sizes: &[f64],
         reads: &[u8],
@@ -367,7 +369,7 @@ impl Guard {
             });
         if !(residual <= bound) {
             return Err(StepError::NewtonNotConverged {
-                stage: Stage::Shake,
+                stage,
                 step,
                 t,
                 source: SolveError::NotConverged {
@@ -450,6 +452,7 @@ impl Guard {
             crate::validate::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
             let scales = (max_abs(q, &[]), max_abs(&[], p));
             self.on_m(
+                Stage::Rattle,
                 &ws.g,
                 &ws.g_size,
                 &ws.g_reads,
@@ -457,18 +460,7 @@ impl Guard {
                 pr.iterations,
                 step,
                 t,
-            )
-            .map_err(|e| match e {
-                StepError::NewtonNotConverged {
-                    step, t, source, ..
-                } => StepError::NewtonNotConverged {
-                    stage: Stage::Rattle,
-                    step,
-                    t,
-                    source,
-                },
-                e => e,
-            })?;
+            )?;
         }
         if self.options.check_component && sys.constraint_count() > 0 {
             let nd = check_nondegeneracy(sys, q, p, ws);

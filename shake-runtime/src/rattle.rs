@@ -171,15 +171,9 @@ pub(crate) fn g_at_roundoff<S: ConstrainedSystem>(
     p: &[f64],
     ws: &mut Workspace,
 ) -> bool {
-    let (d, m) = (ws.d, ws.m);
     sys.constraints(q, p, &mut ws.g);
     sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-    (0..m).all(|i| {
-        let floor: f64 = (0..2 * d)
-            .map(|k| (ws.g_z_1[i + k * m] * if k < d { q[k] } else { p[k - d] }).abs())
-            .sum();
-        ws.g[i].abs() <= 64.0 * f64::EPSILON * floor
-    })
+    crate::validate::g_within_roundoff(&ws.g, &ws.pattern, &ws.g_z_1, (q, p), 64.0, &mut ws.g_size)
 }
 
 /// Brings (q, p) onto M = {g = 0} by Gauss–Newton with the minimum-norm

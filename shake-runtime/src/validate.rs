@@ -170,6 +170,31 @@ pub(crate) fn constraint_bound(tolerance: f64, size: f64, scale: f64) -> f64 {
     tolerance * half * half + 64.0 * f64::EPSILON * size * scale
 }
 
+/// Whether every |g_i| is within `multiple` · ε Σ_k |∂g_i/∂z_k| |z_k|:
+/// what rounding each entry of z = (q, p) in its last bit changes g_i by.
+/// The sum runs over the Jacobian's pattern; `floor` (length m) receives
+/// Σ_k |∂g_i/∂z_k| |z_k|.
+pub(crate) fn g_within_roundoff(
+    g: &[f64],
+    pattern: &[(usize, usize)],
+    g_z: &[f64],
+    (q, p): (&[f64], &[f64]),
+    multiple: f64,
+    floor: &mut [f64],
+) -> bool {
+    let (d, m) = (q.len(), g.len());
+    floor.fill(0.0);
+    for &(i, k) in pattern {
+        if i < m && k < 2 * d {
+            let zk = if k < d { q[k] } else { p[k - d] };
+            floor[i] += (g_z[i + k * m] * zk).abs();
+        }
+    }
+    g.iter()
+        .zip(floor.iter())
+        .all(|(g, f)| g.abs() <= multiple * f64::EPSILON * f)
+}
+
 /// The bound on |g_i| at the result of a step: its round-off,
 /// max(64ε, `newton_tolerance`) · s · scale, s = ‖∂g_i/∂z‖₁ and the scale
 /// of the variables g_i reads. A step solves g = 0 by Newton: the

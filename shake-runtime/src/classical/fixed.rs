@@ -312,7 +312,16 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
         crate::guard::max_abs(&[], &p),
     );
     let size = g0.iter().map(|x| x.abs()).sum::<f64>();
-    guard.on_m(&[r], &[size], &ws.g_reads, scales, iterations, step, t)?;
+    guard.on_m(
+        Stage::Shake,
+        &[r],
+        &[size],
+        &ws.g_reads,
+        scales,
+        iterations,
+        step,
+        t,
+    )?;
     let mut n = [0.0];
     sys.nondegeneracy_matrix(&q, &p, &mut n);
     let n = n[0];

@@ -261,17 +261,10 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
 /// (Evaluates g_z at z1⁻ into `ws.g_z_1`, sums over its pattern only into
 /// `ws.g_size`, which the caller recomputes after the step.)
 fn residual_at_roundoff<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> bool {
-    let (d, m) = (ws.d, ws.m);
-    sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
-    ws.g_size.fill(0.0);
-    for &(i, k) in &ws.pattern {
-        if i < m && k < 2 * d {
-            ws.g_size[i] += (ws.g_z_1[i + k * m] * ws.z1[k]).abs();
-        }
-    }
-    ws.g.iter()
-        .zip(&ws.g_size)
-        .all(|(g, floor)| g.abs() <= 16.0 * f64::EPSILON * floor)
+    let d = ws.d;
+    let (q, p) = ws.z1.split_at(d);
+    sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+    crate::validate::g_within_roundoff(&ws.g, &ws.pattern, &ws.g_z_1, (q, p), 16.0, &mut ws.g_size)
 }
 
 /// Keeps (`save`) or brings back SHAKE's iterate: λ, z1⁻, Δ and g.
