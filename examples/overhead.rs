@@ -16,7 +16,9 @@
 //!   (link vectors first, then their lengths: the generated g expands the
 //!   squares and loses digits like ε|q|², 1e-12 for 64 links), `dE`/`limit_dE` the largest energy
 //!   error of each, `dz` the largest difference between the two
-//!   trajectories after the timed number of steps.
+//!   trajectories after the timed number of steps, `iters`/`limit_iters`
+//!   the Newton iterations of the position stage per step (the limit's
+//!   pendulum takes its root in closed form: 0).
 //!
 //! Times are the minimum over 7 repetitions after a warm-up (the machine
 //! may be shared: the ratios, taken in one run, are what to compare). Then
@@ -102,6 +104,8 @@ struct Row {
     de: f64,
     limit_de: f64,
     dz: f64,
+    iterations: f64,
+    limit_iterations: f64,
 }
 
 /// The library's side: run and step timings, and the run's |g| and energy.
@@ -110,7 +114,7 @@ fn library<S: ConstrainedSystem + Clone>(
     z0: &State,
     steps: u64,
     rel_g: impl Fn(&State) -> f64,
-) -> (f64, f64, f64, f64, State) {
+) -> (f64, f64, f64, f64, State, f64) {
     let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
     let run_us = time_us(steps, || {
         let out = integ
@@ -126,6 +130,15 @@ fn library<S: ConstrainedSystem + Clone>(
         }
         std::hint::black_box(&z);
     });
+    // Newton iterations of the position stage per step (not timed).
+    let mut z = z0.clone();
+    let mut iterations = 0;
+    for _ in 0..steps {
+        iterations += integ
+            .step_in_place(&mut z)
+            .expect("a regular step")
+            .shake_iterations;
+    }
     // Accuracy of the same run (not timed).
     let sys = integ.system().clone();
     let e0 = sys.hamiltonian(z0.q.as_slice(), z0.p.as_slice());
@@ -145,7 +158,14 @@ fn library<S: ConstrainedSystem + Clone>(
         })
         .execute();
     assert!(out.error.is_none());
-    (run_us, step_us, max_g, de, last)
+    (
+        run_us,
+        step_us,
+        max_g,
+        de,
+        last,
+        iterations as f64 / steps as f64,
+    )
 }
 
 fn pendulum(steps: u64) -> Row {
@@ -155,7 +175,7 @@ fn pendulum(steps: u64) -> Row {
     let p0 = [length * om * th.cos(), length * om * th.sin()];
     let z0 = State::from_slices(&q0, &p0);
     let lim = LimitPendulum { length, gravity };
-    let (run_us, step_us, max_rel_g, de, last) = library(
+    let (run_us, step_us, max_rel_g, de, last, iterations) = library(
         shake::models::Pendulum::new(length, gravity),
         &z0,
         steps,
@@ -171,6 +191,7 @@ fn pendulum(steps: u64) -> Row {
     let (mut q, mut p) = (q0, p0);
     let e0 = lim.energy(&q, &p);
     let (mut lg, mut lde) = (0.0f64, 0.0f64);
+    // The limit's pendulum takes the root in closed form: no iteration.
     for _ in 0..steps {
         lim.step(H, &mut q, &mut p);
         lg = lg.max(lim.relative_g(&q));
@@ -186,6 +207,8 @@ fn pendulum(steps: u64) -> Row {
         de,
         limit_de: lde,
         dz,
+        iterations,
+        limit_iterations: 0.0,
     }
 }
 
@@ -194,7 +217,7 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
     let (q0, p0) = limit_chain_state(N, length);
     let z0 = State::from_slices(&q0, &p0);
     let mut lim = LimitChain::<N>::new(length, gravity);
-    let (run_us, step_us, max_rel_g, de, last) =
+    let (run_us, step_us, max_rel_g, de, last, iterations) =
         library(sys, &z0, steps, |z| lim.relative_g(z.q.as_slice()));
     let (mut q, mut p) = (q0.clone(), p0.clone());
     let limit_us = time_us(steps, || {
@@ -209,8 +232,9 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
     p.copy_from_slice(&p0);
     let e0 = lim.energy(&q, &p);
     let (mut lg, mut lde) = (0.0f64, 0.0f64);
+    let mut limit_iterations = 0;
     for _ in 0..steps {
-        lim.step(H, &mut q, &mut p);
+        limit_iterations += lim.step(H, &mut q, &mut p);
         lg = lg.max(lim.relative_g(&q));
         lde = lde.max((lim.energy(&q, &p) - e0).abs());
     }
@@ -224,12 +248,14 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
         de,
         limit_de: lde,
         dz,
+        iterations,
+        limit_iterations: limit_iterations as f64 / steps as f64,
     }
 }
 
 fn print(name: &str, r: &Row) {
     println!(
-        "overhead system={name} run_us={:.4} step_us={:.4} limit_us={:.4} ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e}",
+        "overhead system={name} run_us={:.4} step_us={:.4} limit_us={:.4} ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e} iters={:.2} limit_iters={:.2}",
         r.run_us,
         r.step_us,
         r.limit_us,
@@ -238,7 +264,9 @@ fn print(name: &str, r: &Row) {
         r.limit_rel_g,
         r.de,
         r.limit_de,
-        r.dz
+        r.dz,
+        r.iterations,
+        r.limit_iterations
     );
 }
 

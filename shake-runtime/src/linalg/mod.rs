@@ -19,6 +19,8 @@
 //! [`lu_solve_transpose`]; callers that know the band in advance (SHAKE's
 //! structured Jacobian) call the banded functions directly.
 
+mod tridiagonal;
+
 /// The matrix was exactly singular (a zero pivot) or not finite.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub(crate) struct Singular;
@@ -118,7 +120,7 @@ pub(crate) fn band_lu_factor(
     // The chain's bands get kernels with the widths as constants (their
     // inner loops unrolled); the band itself is found once per system.
     match (band.lower, band.upper) {
-        (1, 1) => band_lu_factor_w(a, n, 1, 2, piv),
+        (1, 1) => tridiagonal::factor(a, n, piv),
         (2, 2) => band_lu_factor_w(a, n, 2, 4, piv),
         (l, u) => band_lu_factor_w(a, n, l, l + u, piv),
     }
@@ -176,7 +178,7 @@ fn band_lu_factor_w(
 /// Solves A x = b in place from the factors of [`band_lu_factor`].
 pub(crate) fn band_lu_solve(lu: &[f64], n: usize, band: Band, piv: &[usize], b: &mut [f64]) {
     match (band.lower, band.upper) {
-        (1, 1) => band_lu_solve_w(lu, n, 1, 2, piv, b),
+        (1, 1) => tridiagonal::solve(lu, n, piv, b),
         (2, 2) => band_lu_solve_w(lu, n, 2, 4, piv, b),
         (l, u) => band_lu_solve_w(lu, n, l, l + u, piv, b),
     }
@@ -218,7 +220,7 @@ pub(crate) fn band_lu_solve_transpose(
     b: &mut [f64],
 ) {
     match (band.lower, band.upper) {
-        (1, 1) => band_lu_solve_transpose_w(lu, n, 1, 2, piv, b),
+        (1, 1) => tridiagonal::solve_transpose(lu, n, piv, b),
         (2, 2) => band_lu_solve_transpose_w(lu, n, 2, 4, piv, b),
         (l, u) => band_lu_solve_transpose_w(lu, n, l, l + u, piv, b),
     }

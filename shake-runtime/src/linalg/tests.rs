@@ -135,3 +135,59 @@ fn expm_of_a_generator_of_rotations() {
         assert!((a[i] - want[i]).abs() < 1e-14, "{a:?} {want:?}");
     }
 }
+
+#[test]
+fn the_tridiagonal_kernels_give_the_general_kernels_bits() {
+    let band = Band { lower: 1, upper: 1 };
+    for n in [1, 2, 3, 16, 41] {
+        // `banded` pivots in about half of the columns; the diagonally
+        // dominant variant never does.
+        for dominant in [false, true] {
+            let mut a = banded(n, band);
+            if dominant {
+                for j in 0..n {
+                    a[j + j * n] += 4.0;
+                }
+            }
+            let (mut lu_w, mut piv_w) = (a.clone(), vec![0; n]);
+            band_lu_factor_w(&mut lu_w, n, 1, 2, &mut piv_w).unwrap();
+            let (mut lu_t, mut piv_t) = (a.clone(), vec![0; n]);
+            band_lu_factor(&mut lu_t, n, band, &mut piv_t).unwrap();
+            assert_eq!(piv_t, piv_w, "n {n}");
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&lu_t), bits(&lu_w), "n {n}");
+            if !dominant && n >= 16 {
+                assert!(
+                    piv_w.iter().enumerate().any(|(k, p)| *p != k),
+                    "n {n} pivots"
+                );
+            }
+            let b0: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).sin() + 0.1).collect();
+            let (mut x_w, mut x_t) = (b0.clone(), b0.clone());
+            band_lu_solve_w(&lu_w, n, 1, 2, &piv_w, &mut x_w);
+            band_lu_solve(&lu_t, n, band, &piv_t, &mut x_t);
+            assert_eq!(bits(&x_t), bits(&x_w), "solve n {n}");
+            let (mut y_w, mut y_t) = (b0.clone(), b0.clone());
+            band_lu_solve_transpose_w(&lu_w, n, 1, 2, &piv_w, &mut y_w);
+            band_lu_solve_transpose(&lu_t, n, band, &piv_t, &mut y_t);
+            assert_eq!(bits(&y_t), bits(&y_w), "transposed solve n {n}");
+            // And both solve the system (the kernels' agreement is not
+            // agreement on a wrong answer).
+            for i in 0..n {
+                let (mut r, mut rt) = (-b0[i], -b0[i]);
+                for j in i.saturating_sub(1)..(i + 2).min(n) {
+                    r += a[i + j * n] * x_t[j];
+                    rt += a[j + i * n] * y_t[j];
+                }
+                assert!(
+                    r.abs() < 1e-10 && rt.abs() < 1e-10,
+                    "n {n} row {i}: {r} {rt}"
+                );
+            }
+        }
+    }
+    // A zero pivot is still refused.
+    let mut z = vec![0.0; 9];
+    let mut piv = vec![0; 3];
+    assert_eq!(band_lu_factor(&mut z, 3, band, &mut piv), Err(Singular));
+}
