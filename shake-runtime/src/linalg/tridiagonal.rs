@@ -14,47 +14,56 @@
 
 use super::Singular;
 
-/// [`super::band_lu_factor`] for band (1, 1).
+/// [`super::band_lu_factor`] for band (1, 1), with row k + 1 (its
+/// diagonal and first superdiagonal as step k leaves them) carried to step
+/// k + 1 in registers.
 #[inline]
 pub(super) fn factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     assert!(a.len() >= n * n && piv.len() >= n);
-    for k in 0..n {
+    if n == 0 {
+        return Ok(());
+    }
+    // Row k at columns k, k + 1 (column k + 2 is outside the band: zero).
+    let (mut d, mut u1) = (a[0], if n > 1 { a[n] } else { 0.0 });
+    for k in 0..n - 1 {
         let kk = k + k * n;
-        if k + 1 == n {
-            piv[k] = k;
-            let v = a[kk];
-            if v == 0.0 || !v.is_finite() {
-                return Err(Singular);
-            }
-            a[kk] = 1.0 / v;
-            break;
-        }
-        // Column k has rows k and k + 1; rows k, k + 1 reach columns up to
-        // k + 2 (the fill of an interchange).
-        let (diag, below) = (a[kk].abs(), a[kk + 1].abs());
-        let swap = below > diag;
-        let max = if swap { below } else { diag };
+        let wide = k + 2 < n;
+        // Row k + 1 at columns k, k + 1, k + 2, as given.
+        let below = a[kk + 1];
+        let (b1, b2) = (a[kk + 1 + n], if wide { a[kk + 1 + 2 * n] } else { 0.0 });
+        let swap = below.abs() > d.abs();
+        let max = if swap { below.abs() } else { d.abs() };
         piv[k] = if swap { k + 1 } else { k };
         if max == 0.0 || !max.is_finite() {
             return Err(Singular);
         }
-        let last = (k + 2).min(n - 1);
-        if swap {
-            for j in k..=last {
-                a.swap(k + j * n, k + 1 + j * n);
+        // The pivot row and the row it eliminates from.
+        let (top, mut low) = if swap {
+            ([below, b1, b2], [d, u1, 0.0])
+        } else {
+            ([d, u1, 0.0], [below, b1, b2])
+        };
+        let inv = 1.0 / top[0];
+        let l = low[0] * inv;
+        for j in 1..3 {
+            if top[j] != 0.0 {
+                low[j] -= l * top[j];
             }
         }
-        let inv = 1.0 / a[kk];
         a[kk] = inv;
-        let l = a[kk + 1] * inv;
         a[kk + 1] = l;
-        for j in k + 1..=last {
-            let akj = a[k + j * n];
-            if akj != 0.0 {
-                a[k + 1 + j * n] -= l * akj;
-            }
+        a[kk + n] = top[1];
+        if wide {
+            a[kk + 2 * n] = top[2];
         }
+        (d, u1) = (low[1], low[2]);
     }
+    if d == 0.0 || !d.is_finite() {
+        return Err(Singular);
+    }
+    let last = (n - 1) * (n + 1);
+    piv[n - 1] = n - 1;
+    a[last] = 1.0 / d;
     Ok(())
 }
 
