@@ -24,6 +24,7 @@
 //! at the start of the run and det N at the previous state.
 
 use crate::error::{SolveError, Stage, StepError};
+use crate::linalg::{all_finite, norm_inf};
 use crate::newton::NewtonOptions;
 use crate::rattle::{
     check_nondegeneracy, factor_and_check, n_change, NondegeneracyCheck, ProjectionReport,
@@ -208,6 +209,9 @@ impl Guard {
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
+        if all_finite(q) && all_finite(p) {
+            return Ok(());
+        }
         match q.iter().chain(p).position(|x| !x.is_finite()) {
             None => Ok(()),
             Some(entry) => Err(StepError::NonFinite {
@@ -521,12 +525,20 @@ impl Guard {
 /// ‖(q, p)‖∞, NaN-propagating.
 #[inline]
 pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
-    let mut m = 0.0f64;
-    for x in q.iter().chain(p) {
-        if x.is_nan() {
-            return f64::NAN;
+    if q.len() + p.len() <= 8 {
+        // (A few entries: one pass, no lanes to set up.)
+        let mut m = 0.0f64;
+        for x in q.iter().chain(p) {
+            if x.is_nan() {
+                return f64::NAN;
+            }
+            m = m.max(x.abs());
         }
-        m = m.max(x.abs());
+        return m;
     }
-    m
+    let nan = q.iter().chain(p).fold(false, |n, x| n | x.is_nan());
+    if nan {
+        return f64::NAN;
+    }
+    norm_inf(q).max(norm_inf(p))
 }

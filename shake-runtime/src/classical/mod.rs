@@ -52,7 +52,7 @@ pub mod fixed;
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::linalg::{band_lu_factor, band_lu_solve, lu_solve, norm_inf};
+use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf};
 use crate::newton::NewtonOptions;
 use crate::shake::{ShakeReport, Workspace};
 use crate::system::{ConstrainedSystem, ConstraintKind};
@@ -218,7 +218,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     loop {
         let r = norm_inf(&ws.g);
         // (norm_inf skips NaN: look at every entry.)
-        if !r.is_finite() || !ws.g.iter().chain(&ws.dz[..d]).all(|x| x.is_finite()) {
+        if !r.is_finite() || !(all_finite(&ws.g) && all_finite(&ws.dz[..d])) {
             return Err(not_finite(iterations));
         }
         // The residual at round-off: no update can improve this iterate.
@@ -244,12 +244,10 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
         }
         ws.delta.copy_from_slice(&ws.g);
         band_lu_solve(&ws.jac, m, ws.jac_band, &ws.piv_j, &mut ws.delta);
-        let (mut step, mut size) = (0.0f64, 0.0f64);
         for (l, dl) in ws.lambda.iter_mut().zip(&ws.delta) {
             *l -= dl;
-            step = step.max(dl.abs());
-            size = size.max(l.abs());
         }
+        let (step, size) = (norm_inf(&ws.delta), norm_inf(&ws.lambda));
         if iterations == 0 {
             ws.lambda_first.copy_from_slice(&ws.lambda);
         }

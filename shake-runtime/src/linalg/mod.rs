@@ -445,9 +445,33 @@ pub(crate) fn inverse_norm1_estimate_from(
     est
 }
 
-/// Largest absolute entry of a slice.
+/// Largest absolute entry of a slice (NaN entries are skipped, as by
+/// `f64::max`).
+///
+/// Four running maxima instead of one: a single one chains every entry's
+/// `max` on the previous one's latency, and `max` is exact in any order,
+/// so the lanes give the same number and vectorise.
+#[inline]
 pub(crate) fn norm_inf(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |m, x| f64::max(m, x.abs()))
+    let mut lanes = [0.0f64; 4];
+    let chunks = v.chunks_exact(4);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for (l, x) in lanes.iter_mut().zip(c) {
+            *l = l.max(x.abs());
+        }
+    }
+    for x in rest {
+        lanes[0] = lanes[0].max(x.abs());
+    }
+    lanes[0].max(lanes[1]).max(lanes[2].max(lanes[3]))
+}
+
+/// Whether every entry is finite. (Without short-circuiting: a flag that
+/// every entry `and`s into vectorises, and a run's vectors are finite.)
+#[inline]
+pub(crate) fn all_finite(v: &[f64]) -> bool {
+    v.iter().fold(true, |ok, x| ok & x.is_finite())
 }
 
 /// Matrix product c = a b of n×n column-major matrices.

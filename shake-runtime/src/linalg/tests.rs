@@ -191,3 +191,31 @@ fn the_tridiagonal_kernels_give_the_general_kernels_bits() {
     let mut piv = vec![0; 3];
     assert_eq!(band_lu_factor(&mut z, 3, band, &mut piv), Err(Singular));
 }
+
+#[test]
+fn norm_inf_and_all_finite_in_lanes_agree_with_one_pass() {
+    let serial = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    for n in 0..13 {
+        let mut v: Vec<f64> = (0..n)
+            .map(|i| ((i * 7 % 5) as f64 - 2.0) * 1.5f64.powi(i as i32))
+            .collect();
+        assert_eq!(norm_inf(&v).to_bits(), serial(&v).to_bits(), "n {n}");
+        assert!(all_finite(&v));
+        for k in 0..n {
+            // NaN is skipped by both (and found by all_finite); an infinity
+            // is the norm wherever it sits.
+            let keep = v[k];
+            v[k] = f64::NAN;
+            assert_eq!(
+                norm_inf(&v).to_bits(),
+                serial(&v).to_bits(),
+                "n {n} NaN at {k}"
+            );
+            assert!(!all_finite(&v), "n {n} NaN at {k}");
+            v[k] = -f64::INFINITY;
+            assert_eq!(norm_inf(&v), f64::INFINITY, "n {n} inf at {k}");
+            assert!(!all_finite(&v));
+            v[k] = keep;
+        }
+    }
+}
