@@ -218,7 +218,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     loop {
         let r = norm_inf(&ws.g);
         // (norm_inf skips NaN: look at every entry.)
-        if !r.is_finite() || !(all_finite(&ws.g) && all_finite(&ws.dz[..d])) {
+        if !(r.is_finite() && all_finite(&ws.g) && all_finite(&ws.dz[..d])) {
             return Err(not_finite(iterations));
         }
         // The residual at round-off: no update can improve this iterate.
