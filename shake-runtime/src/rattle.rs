@@ -26,8 +26,8 @@
 
 use crate::error::{Stage, StepError};
 use crate::linalg::{
-    band_lu_factor, inverse_norm1_estimate_from, lu_det, lu_factor, lu_solve, norm_inf, Band,
-    Singular,
+    band_lu_factor, copy_short, inverse_norm1_estimate_from, lu_det, lu_factor, lu_solve, norm_inf,
+    zero_short, Band, Singular,
 };
 use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::shake::Workspace;
@@ -295,8 +295,11 @@ fn factor_n(ws: &mut Workspace) -> Result<(), Singular> {
     for j in 0..m {
         let (lo, hi) = (j.saturating_sub(fill), (j + band.lower).min(m - 1));
         let (top, col) = (j.saturating_sub(band.upper), j * m);
-        ws.jac[lo + col..top + col].fill(0.0);
-        ws.jac[top + col..=hi + col].copy_from_slice(&ws.n_mat[top + col..=hi + col]);
+        zero_short(&mut ws.jac[lo + col..top + col]);
+        copy_short(
+            &mut ws.jac[top + col..=hi + col],
+            &ws.n_mat[top + col..=hi + col],
+        );
     }
     band_lu_factor(&mut ws.jac, m, band, &mut ws.piv)?;
     ws.piv[m] = band.lower;

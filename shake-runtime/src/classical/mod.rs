@@ -52,7 +52,7 @@ pub mod fixed;
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf};
+use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf, zero_short};
 use crate::newton::NewtonOptions;
 use crate::shake::{ShakeReport, Workspace};
 use crate::system::{ConstrainedSystem, ConstraintKind};
@@ -120,26 +120,17 @@ fn jacobian<S: ConstrainedSystem>(
     for j in 0..m {
         let lo = j.saturating_sub(fill);
         let hi = (j + band.lower).min(m - 1);
-        ws.jac[lo + j * m..=hi + j * m].fill(0.0);
+        zero_short(&mut ws.jac[lo + j * m..=hi + j * m]);
     }
     if !ws.cl_mass.is_empty() {
         // A diagonal (masses): J = −h Σ_k a_k G1[:,k] G0[:,k]ᵀ, a sum of
         // outer products of G's sparse columns, with no call to `grad_p`
         // and no column groups (a chain: 4 products per variable).
-        for k in 0..d {
-            let a = h * ws.cl_mass[k];
-            if a == 0.0 {
-                continue;
-            }
-            let rows = &ws.cl_col_rows[ws.cl_col_start[k]..ws.cl_col_start[k + 1]];
-            for &i in rows {
-                let gi = a * ws.g_z_1[i + k * m];
-                for &j in rows {
-                    if i <= j + band.lower && j <= i + band.upper {
-                        ws.jac[i + j * m] -= gi * ws.g_z_y[j + k * m];
-                    }
-                }
-            }
+        // (The terms in the band are listed once per system, in the
+        // order of this sum: `Workspace::cl_products`.)
+        for &[k, g1, g0, at] in &ws.cl_products {
+            let gi = (h * ws.cl_mass[k]) * ws.g_z_1[g1];
+            ws.jac[at] -= gi * ws.g_z_y[g0];
         }
         return band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
             .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }));

@@ -467,6 +467,34 @@ pub(crate) fn norm_inf(v: &[f64]) -> f64 {
     lanes[0].max(lanes[1]).max(lanes[2].max(lanes[3]))
 }
 
+/// `v.fill(0.0)` for the few entries of a band's column: up to eight
+/// stores written out, where `fill` would call `memset` (whose call costs
+/// more than the stores in a narrow band, once per column and step).
+#[inline(always)]
+pub(crate) fn zero_short(v: &mut [f64]) {
+    if v.len() > 8 {
+        return v.fill(0.0);
+    }
+    for i in 0..8 {
+        if i < v.len() {
+            v[i] = 0.0;
+        }
+    }
+}
+
+/// `dst.copy_from_slice(src)` for a band's column, as [`zero_short`].
+#[inline(always)]
+pub(crate) fn copy_short(dst: &mut [f64], src: &[f64]) {
+    if dst.len() > 8 || dst.len() != src.len() {
+        return dst.copy_from_slice(src);
+    }
+    for i in 0..8 {
+        if i < dst.len() {
+            dst[i] = src[i];
+        }
+    }
+}
+
 /// Whether every entry is finite. (Without short-circuiting: a flag that
 /// every entry `and`s into vectorises, and a run's vectors are finite.)
 #[inline]

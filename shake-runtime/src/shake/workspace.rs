@@ -86,6 +86,10 @@ pub(crate) struct Workspace {
     pub(crate) g_reads: Vec<u8>,
     pub(crate) cl_col_start: Vec<usize>,
     pub(crate) cl_col_rows: Vec<usize>,
+    /// The terms a_k G1[i,k] G0[j,k] of SHAKE's Jacobian that fall in its
+    /// band (A diagonal), in the order the sum takes them: k, the entry of
+    /// G1 (i + k m), of G0 (j + k m) and of the Jacobian (i + j m).
+    pub(crate) cl_products: Vec<[usize; 4]>,
     /// −a h ∇V(q0), the first kick.
     pub(crate) cl_kick: Vec<f64>,
     /// The momentum increment before the last kick.
@@ -104,6 +108,12 @@ pub(crate) struct Workspace {
 
 impl Workspace {
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S) -> Self {
+        let mut ws = Self::buffers(sys);
+        ws.cl_products = jacobian_products(&ws);
+        ws
+    }
+
+    fn buffers<S: ConstrainedSystem>(sys: &S) -> Self {
         let d = sys.dof();
         let m = sys.constraint_count();
         let n = 2 * d;
@@ -175,6 +185,7 @@ impl Workspace {
             g_reads: crate::validate::reads(sys.jacobian_pattern(), d, m),
             cl_col_start: column_starts(sys, d, m),
             cl_col_rows: column_rows(sys, d, m),
+            cl_products: Vec::new(),
             cl_kick: vec![0.0; d],
             cl_u: vec![0.0; d],
             cl_v: vec![0.0; d],
@@ -228,6 +239,29 @@ fn column_starts<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize
         start[k + 1] += start[k];
     }
     start
+}
+
+/// `cl_products`: for each k with a_k ≠ 0 and each pair (i, j) of rows of
+/// G's column k within the Jacobian's band, [k, i + k m, j + k m, i + j m]
+/// (k, then i, then j: the order of the sum it replaces). Empty unless A
+/// is diagonal.
+fn jacobian_products(ws: &Workspace) -> Vec<[usize; 4]> {
+    let (m, band) = (ws.m, ws.jac_band);
+    let mut products = Vec::new();
+    for k in 0..ws.cl_mass.len() {
+        if ws.cl_mass[k] == 0.0 {
+            continue;
+        }
+        let rows = &ws.cl_col_rows[ws.cl_col_start[k]..ws.cl_col_start[k + 1]];
+        for &i in rows {
+            for &j in rows {
+                if i <= j + band.lower && j <= i + band.upper {
+                    products.push([k, i + k * m, j + k * m, i + j * m]);
+                }
+            }
+        }
+    }
+    products
 }
 
 /// The rows of each column k < d of G, column after column.
