@@ -21,6 +21,45 @@
 
 mod tridiagonal;
 
+/// `$e` with `$n` as the constant `$N` when n is 2 to 8, else `$other`:
+/// the small Newton matrices (a few constraints) get kernels whose loops
+/// the compiler unrolls, computing the same operations in the same order.
+macro_rules! small_n {
+    ($n:expr, $N:ident => $e:expr, _ => $other:expr) => {
+        match $n {
+            2 => {
+                const $N: usize = 2;
+                $e
+            }
+            3 => {
+                const $N: usize = 3;
+                $e
+            }
+            4 => {
+                const $N: usize = 4;
+                $e
+            }
+            5 => {
+                const $N: usize = 5;
+                $e
+            }
+            6 => {
+                const $N: usize = 6;
+                $e
+            }
+            7 => {
+                const $N: usize = 7;
+                $e
+            }
+            8 => {
+                const $N: usize = 8;
+                $e
+            }
+            _ => $other,
+        }
+    };
+}
+
 /// The matrix was exactly singular (a zero pivot) or not finite.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub(crate) struct Singular;
@@ -99,7 +138,7 @@ pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<()
             }
         }
     }
-    dense_lu_factor(a, n, piv)
+    small_n!(n, N => dense_lu_factor(a, N, piv), _ => dense_lu_factor(a, n, piv))
 }
 
 /// Banded LU with partial pivoting (LAPACK's `dgbtrf`), in place in the
@@ -122,6 +161,10 @@ pub(crate) fn band_lu_factor(
     match (band.lower, band.upper) {
         (1, 1) => tridiagonal::factor(a, n, piv),
         (2, 2) => band_lu_factor_w(a, n, 2, 4, piv),
+        (l, u) if l + 1 == n && u + 1 == n => {
+            small_n!(n, N => band_lu_factor_w(a, N, N - 1, 2 * N - 2, piv),
+            _ => band_lu_factor_w(a, n, l, l + u, piv))
+        }
         (l, u) => band_lu_factor_w(a, n, l, l + u, piv),
     }
 }
@@ -180,6 +223,10 @@ pub(crate) fn band_lu_solve(lu: &[f64], n: usize, band: Band, piv: &[usize], b: 
     match (band.lower, band.upper) {
         (1, 1) => tridiagonal::solve(lu, n, piv, b),
         (2, 2) => band_lu_solve_w(lu, n, 2, 4, piv, b),
+        (l, u) if l + 1 == n && u + 1 == n => {
+            small_n!(n, N => band_lu_solve_w(lu, N, N - 1, 2 * N - 2, piv, b),
+            _ => band_lu_solve_w(lu, n, l, l + u, piv, b))
+        }
         (l, u) => band_lu_solve_w(lu, n, l, l + u, piv, b),
     }
 }
@@ -222,6 +269,10 @@ pub(crate) fn band_lu_solve_transpose(
     match (band.lower, band.upper) {
         (1, 1) => tridiagonal::solve_transpose(lu, n, piv, b),
         (2, 2) => band_lu_solve_transpose_w(lu, n, 2, 4, piv, b),
+        (l, u) if l + 1 == n && u + 1 == n => {
+            small_n!(n, N => band_lu_solve_transpose_w(lu, N, N - 1, 2 * N - 2, piv, b),
+            _ => band_lu_solve_transpose_w(lu, n, l, l + u, piv, b))
+        }
         (l, u) => band_lu_solve_transpose_w(lu, n, l, l + u, piv, b),
     }
 }
@@ -256,6 +307,7 @@ fn band_lu_solve_transpose_w(
 }
 
 /// The dense LU of [`lu_factor`] (rows swapped across the whole matrix).
+#[inline(always)]
 fn dense_lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     for k in 0..n {
         // Pivot: the largest entry of column k on or below the diagonal.
@@ -298,6 +350,12 @@ pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     if let Some(band) = recorded_band(piv, n) {
         return band_lu_solve(lu, n, band, piv, b);
     }
+    small_n!(n, N => dense_lu_solve(lu, N, piv, b), _ => dense_lu_solve(lu, n, piv, b))
+}
+
+/// The dense part of [`lu_solve`].
+#[inline(always)]
+fn dense_lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     for k in 0..n {
         b.swap(k, piv[k]);
     }
@@ -327,6 +385,12 @@ pub(crate) fn lu_solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f
     if let Some(band) = recorded_band(piv, n) {
         return band_lu_solve_transpose(lu, n, band, piv, b);
     }
+    small_n!(n, N => dense_lu_solve_transpose(lu, N, piv, b), _ => dense_lu_solve_transpose(lu, n, piv, b))
+}
+
+/// The dense part of [`lu_solve_transpose`].
+#[inline(always)]
+fn dense_lu_solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     // Aᵀ = Uᵀ Lᵀ P, so solve Uᵀ y = b, Lᵀ w = y, x = Pᵀ w.
     for j in 0..n {
         let mut s = b[j];

@@ -219,3 +219,53 @@ fn norm_inf_and_all_finite_in_lanes_agree_with_one_pass() {
         }
     }
 }
+
+#[test]
+fn small_kernels_of_every_size_solve_and_give_the_run_time_size_bits() {
+    for n in 1..=10 {
+        let a = banded(n, Band::full(n));
+        let b0: Vec<f64> = (0..n).map(|i| 1.0 - 0.3 * i as f64).collect();
+        // The dense path (`lu_factor` without spare pivot slots) and the
+        // banded one with a full band.
+        let (mut lu, mut piv) = (a.clone(), vec![0; n]);
+        lu_factor(&mut lu, n, &mut piv).unwrap();
+        let (mut lu_b, mut piv_b) = (a.clone(), vec![0; n]);
+        band_lu_factor(&mut lu_b, n, Band::full(n), &mut piv_b).unwrap();
+        let (mut lu_r, mut piv_r) = (a.clone(), vec![0; n]);
+        // The same kernels at a size the compiler does not know.
+        let n_rt = std::hint::black_box(n);
+        dense_lu_factor(&mut lu_r, n_rt, &mut piv_r).unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&lu), bits(&lu_r), "n {n}");
+        for transpose in [false, true] {
+            let (mut x, mut xb, mut xr) = (b0.clone(), b0.clone(), b0.clone());
+            if transpose {
+                lu_solve_transpose(&lu, n, &piv, &mut x);
+                band_lu_solve_transpose(&lu_b, n, Band::full(n), &piv_b, &mut xb);
+                dense_lu_solve_transpose(&lu_r, n_rt, &piv_r, &mut xr);
+            } else {
+                lu_solve(&lu, n, &piv, &mut x);
+                band_lu_solve(&lu_b, n, Band::full(n), &piv_b, &mut xb);
+                dense_lu_solve(&lu_r, n_rt, &piv_r, &mut xr);
+            }
+            assert_eq!(bits(&x), bits(&xr), "n {n} transpose {transpose}");
+            for (x, name) in [(&x, "dense"), (&xb, "banded")] {
+                for i in 0..n {
+                    let mut r = -b0[i];
+                    for j in 0..n {
+                        let aij = if transpose {
+                            a[j + i * n]
+                        } else {
+                            a[i + j * n]
+                        };
+                        r += aij * x[j];
+                    }
+                    assert!(
+                        r.abs() < 1e-10,
+                        "{name} n {n} transpose {transpose} row {i}: {r}"
+                    );
+                }
+            }
+        }
+    }
+}
