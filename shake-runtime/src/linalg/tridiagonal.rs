@@ -1,6 +1,6 @@
 //! The banded LU of a tridiagonal matrix (band 1, 1: a chain's SHAKE
 //! Jacobian and its N), written out: LAPACK's `dgttrf`/`dgttrs` on the
-//! dense column-major slice of [`super::band_lu_factor`].
+//! dense column-major slice of [`super::band::band_lu_factor`].
 //!
 //! The factors are the general banded kernel's, entry for entry and in the
 //! same order of operations (so the same bits): L's multiplier l_k below
@@ -14,7 +14,7 @@
 
 use super::Singular;
 
-/// [`super::band_lu_factor`] for band (1, 1), with row k + 1 (its
+/// [`super::band::band_lu_factor`] for band (1, 1), with row k + 1 (its
 /// diagonal and first superdiagonal as step k leaves them) carried to step
 /// k + 1 in registers.
 #[inline]
@@ -67,7 +67,7 @@ pub(super) fn factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), S
     Ok(())
 }
 
-/// [`super::band_lu_solve`] for band (1, 1).
+/// [`super::band::band_lu_solve`] for band (1, 1).
 #[inline]
 pub(super) fn solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     assert!(lu.len() >= n * n && piv.len() >= n && b.len() >= n);
@@ -104,7 +104,7 @@ pub(super) fn solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     }
 }
 
-/// [`super::band_lu_solve_transpose`] for band (1, 1).
+/// [`super::band::band_lu_solve_transpose`] for band (1, 1).
 #[inline]
 pub(super) fn solve_transpose(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     assert!(lu.len() >= n * n && piv.len() >= n && b.len() >= n);

@@ -14,7 +14,7 @@ use crate::solver::SpdSolver;
 pub(super) struct Global {
     pub(super) solver: SpdSolver,
     /// Assembly of N from gradients: entry `pos[e]` gains
-    /// W_{part[e]} ∇_a g_x · ∇_a g_y with the two gradient blocks at
+    /// `W_{part[e]}` ∇_a g_x · ∇_a g_y with the two gradient blocks at
     /// `ga[e]`, `gb[e]`.
     pub(super) pos: Vec<u32>,
     pub(super) ga: Vec<u32>,

@@ -86,7 +86,7 @@ pub(crate) struct Workspace {
     pub(crate) g_reads: Vec<u8>,
     pub(crate) cl_col_start: Vec<usize>,
     pub(crate) cl_col_rows: Vec<usize>,
-    /// The terms a_k G1[i,k] G0[j,k] of SHAKE's Jacobian that fall in its
+    /// The terms a_k G1(i, k) G0(j, k) of SHAKE's Jacobian that fall in its
     /// band (A diagonal), in the order the sum takes them: k, the entry of
     /// G1 (i + k m), of G0 (j + k m) and of the Jacobian (i + j m).
     pub(crate) cl_products: Vec<[usize; 4]>,
