@@ -48,6 +48,9 @@
 //! other classical system.
 
 pub mod fixed;
+mod workspace;
+
+pub(crate) use workspace::Buffers;
 
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
@@ -72,33 +75,33 @@ pub(crate) fn classical<S: ConstrainedSystem, B: BaseMap>(sys: &S, base: &B) -> 
 }
 
 /// q1(λ) and r(λ) = g(q1(λ)) for the λ in `ws.lambda`: the momentum
-/// increment before the last kick, p* − p0 − G0ᵀλ, in `ws.cl_u`
+/// increment before the last kick, p* − p0 − G0ᵀλ, in `ws.classical.u`
 /// (`first`: λ = 0, u = the first kick only), Δq in `ws.dz[..d]`, q1 in
 /// `ws.z1[..d]`, r in `ws.g`.
 fn residual<S: ConstrainedSystem>(sys: &S, h: f64, ws: &mut Workspace, first: bool) {
     let d = ws.d;
     let m = ws.m;
-    ws.cl_u.copy_from_slice(&ws.cl_kick);
+    ws.classical.u.copy_from_slice(&ws.classical.kick);
     if !first {
         // u ← u − G0ᵀλ: the fibre flow's kick, in the system's closed form
         // when it has one (straight-line code), else through the pattern.
         ws.y[..d].copy_from_slice(&ws.z0[..d]);
         if !sys
-            .fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.cl_u)
+            .fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.classical.u)
             .applied()
         {
-            for &(i, k) in &ws.cl_pattern {
-                ws.cl_u[k] -= ws.g_z_y[i + k * m] * ws.lambda[i];
+            for &(i, k) in &ws.classical.pattern {
+                ws.classical.u[k] -= ws.g_z_y[i + k * m] * ws.lambda[i];
             }
         }
     }
     // p½ = p0 + u; Δq = h A p½ (grad_p is linear in p).
     for k in 0..d {
-        ws.cl_v[k] = ws.z0[d + k] + ws.cl_u[k];
+        ws.classical.v[k] = ws.z0[d + k] + ws.classical.u[k];
     }
-    sys.grad_p(&ws.z0[..d], &ws.cl_v, &mut ws.cl_w);
+    sys.grad_p(&ws.z0[..d], &ws.classical.v, &mut ws.classical.w);
     for k in 0..d {
-        ws.dz[k] = h * ws.cl_w[k];
+        ws.dz[k] = h * ws.classical.w[k];
         ws.z1[k] = ws.z0[k] + ws.dz[k];
     }
     sys.constraints(&ws.z1[..d], &ws.z0[d..], &mut ws.g);
@@ -122,14 +125,14 @@ fn jacobian<S: ConstrainedSystem>(
         let hi = (j + band.lower).min(m - 1);
         zero_short(&mut ws.jac[lo + j * m..=hi + j * m]);
     }
-    if !ws.cl_mass.is_empty() {
+    if !ws.classical.mass.is_empty() {
         // A diagonal (masses): J = −h Σ_k a_k G1[:,k] G0[:,k]ᵀ, a sum of
         // outer products of G's sparse columns, with no call to `grad_p`
         // and no column groups (a chain: 4 products per variable).
         // (The terms in the band are listed once per system, in the
         // order of this sum: `Workspace::cl_products`.)
-        for &[k, g1, g0, at] in &ws.cl_products {
-            let gi = (h * ws.cl_mass[k]) * ws.g_z_1[g1];
+        for &[k, g1, g0, at] in &ws.classical.products {
+            let gi = (h * ws.classical.mass[k]) * ws.g_z_1[g1];
             ws.jac[at] -= gi * ws.g_z_y[g0];
         }
         return band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
@@ -137,16 +140,16 @@ fn jacobian<S: ConstrainedSystem>(
     }
     for c in 0..groups {
         // v = −G0ᵀ s_c, s_c the indicator of the columns j ≡ c; w = h A v.
-        ws.cl_v.fill(0.0);
-        for (&(i, k), &grp) in ws.cl_pattern.iter().zip(&ws.cl_group) {
+        ws.classical.v.fill(0.0);
+        for (&(i, k), &grp) in ws.classical.pattern.iter().zip(&ws.classical.group) {
             if grp == c {
-                ws.cl_v[k] -= ws.g_z_y[i + k * m];
+                ws.classical.v[k] -= ws.g_z_y[i + k * m];
             }
         }
-        sys.grad_p(&ws.z0[..d], &ws.cl_v, &mut ws.cl_w);
+        sys.grad_p(&ws.z0[..d], &ws.classical.v, &mut ws.classical.w);
         ws.jv.fill(0.0);
-        for &(i, k) in &ws.cl_pattern {
-            ws.jv[i] += ws.g_z_1[i + k * m] * ws.cl_w[k];
+        for &(i, k) in &ws.classical.pattern {
+            ws.jv[i] += ws.g_z_1[i + k * m] * ws.classical.w[k];
         }
         for i in 0..m {
             let lo = i.saturating_sub(band.lower);
@@ -180,18 +183,18 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     ws.z0[d..].copy_from_slice(p);
     ws.lambda.fill(0.0);
     // The first kick and G0.
-    sys.grad_q(q, p, &mut ws.cl_hq);
+    sys.grad_q(q, p, &mut ws.classical.hq);
     for k in 0..d {
-        ws.cl_kick[k] = -(a * h) * ws.cl_hq[k];
+        ws.classical.kick[k] = -(a * h) * ws.classical.hq[k];
     }
     sys.constraint_jacobian(q, p, &mut ws.g_z_y);
     // The round-off level of each g_i near q0: what rounding q to its
     // last bit changes it by, ε Σ_k |∂g_i/∂q_k| |q_k|. (Not more: the
     // momenta come out of λ divided by h, so a residual left 4 times above
     // this shows in p as 4 times the round-off of a converged step.)
-    ws.cl_floor.fill(0.0);
-    for &(i, k) in &ws.cl_pattern {
-        ws.cl_floor[i] += f64::EPSILON * (ws.g_z_y[i + k * m] * q[k]).abs();
+    ws.classical.floor.fill(0.0);
+    for &(i, k) in &ws.classical.pattern {
+        ws.classical.floor[i] += f64::EPSILON * (ws.g_z_y[i + k * m] * q[k]).abs();
     }
     residual(sys, h, ws, true);
     let mut report = ShakeReport::default();
@@ -213,7 +216,13 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
             return Err(not_finite(iterations));
         }
         // The residual at round-off: no update can improve this iterate.
-        if r == 0.0 || ws.g.iter().zip(&ws.cl_floor).all(|(g, f)| g.abs() <= *f) {
+        if r == 0.0
+            || ws
+                .g
+                .iter()
+                .zip(&ws.classical.floor)
+                .all(|(g, f)| g.abs() <= *f)
+        {
             break;
         }
         if iterations >= opts.max_iterations {
@@ -272,7 +281,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
             }
         }
         if iterations == 1 {
-            lambda_noise = step / r_first * norm_inf(&ws.cl_floor);
+            lambda_noise = step / r_first * norm_inf(&ws.classical.floor);
         }
         let tol = (opts.step_tolerance * size).max(lambda_noise);
         let theta = step / prev;
@@ -299,13 +308,13 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     }
     // p1 − p0 = u − b h ∇V(q1), each part a small quantity.
     if b != 0.0 {
-        sys.grad_q(&ws.z1[..d], &ws.z0[d..], &mut ws.cl_hq);
+        sys.grad_q(&ws.z1[..d], &ws.z0[d..], &mut ws.classical.hq);
     }
     for k in 0..d {
         ws.dz[d + k] = if b != 0.0 {
-            ws.cl_u[k] - (b * h) * ws.cl_hq[k]
+            ws.classical.u[k] - (b * h) * ws.classical.hq[k]
         } else {
-            ws.cl_u[k]
+            ws.classical.u[k]
         };
     }
     match carry {
@@ -354,10 +363,10 @@ pub(crate) fn project<S: ConstrainedSystem>(
         lu_solve(&ws.jac, m, &ws.piv, &mut ws.sigma);
     }
     // The kick, through the system's closed form when it has one.
-    ws.cl_v[..q.len()].copy_from_slice(q);
-    if !sys.fibre_flow(&ws.sigma, &mut ws.cl_v, p).applied() {
+    ws.classical.v[..q.len()].copy_from_slice(q);
+    if !sys.fibre_flow(&ws.sigma, &mut ws.classical.v, p).applied() {
         sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-        for &(i, k) in &ws.cl_pattern {
+        for &(i, k) in &ws.classical.pattern {
             p[k] -= ws.g_z_1[i + k * m] * ws.sigma[i];
         }
     }

@@ -421,17 +421,17 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
         sys.constraint_jacobian(&ws.z1[..d], &ws.z1[d..], &mut ws.g_z_1);
         base.prepare_tangent(sys, h, base_ws)
             .map_err(|e| StepError::from_solve(Stage::BaseMap, e))?;
-    } else if ws.lambda_scale == 0.0 {
-        ws.lambda_scale = lambda_scale(sys, ws);
+    } else if ws.probe.lambda_scale == 0.0 {
+        ws.probe.lambda_scale = lambda_scale(sys, ws);
     }
     let lam_norm = norm_inf(&ws.lambda);
     for c in 0..groups {
         if mode == JacobianMode::Differences {
             // λ + ε s_c, with the increment each λ_j actually got.
-            let eps = f64::EPSILON.sqrt() * lam_norm.max(ws.lambda_scale);
-            ws.lambda_probe.copy_from_slice(&ws.lambda);
+            let eps = f64::EPSILON.sqrt() * lam_norm.max(ws.probe.lambda_scale);
+            ws.probe.lambda.copy_from_slice(&ws.lambda);
             for j in (c..m).step_by(groups) {
-                ws.lambda_probe[j] += eps;
+                ws.probe.lambda[j] += eps;
             }
             // The same increment form as the residual, so that the
             // quotient differences like with like.
@@ -439,23 +439,23 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
                 sys,
                 base,
                 h,
-                &ws.lambda_probe,
+                &ws.probe.lambda,
                 true,
                 &ws.z0,
                 &mut ws.fibre,
                 base_ws,
                 opts,
-                &mut ws.dz_probe,
+                &mut ws.probe.dz,
                 &mut ws.db,
-                &mut ws.y_probe,
-                &mut ws.z1_probe,
+                &mut ws.probe.y,
+                &mut ws.probe.z1,
             )?;
-            sys.constraints(&ws.z1_probe[..d], &ws.z1_probe[d..], &mut ws.g_probe);
+            sys.constraints(&ws.probe.z1[..d], &ws.probe.z1[d..], &mut ws.probe.g);
             for i in 0..m {
-                ws.jv[i] = ws.g_probe[i] - ws.g[i];
+                ws.jv[i] = ws.probe.g[i] - ws.g[i];
             }
             for j in (c..m).step_by(groups) {
-                ws.lambda_probe[j] -= ws.lambda[j];
+                ws.probe.lambda[j] -= ws.lambda[j];
             }
         } else {
             // tv = Dφ_h(y) Σ_{j ≡ c} X_{g_j}(y), jv = g_z(z1⁻) tv, both
@@ -486,7 +486,7 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
                 continue;
             }
             let scale = if mode == JacobianMode::Differences {
-                1.0 / ws.lambda_probe[j]
+                1.0 / ws.probe.lambda[j]
             } else {
                 1.0
             };
@@ -502,12 +502,13 @@ fn jacobian<S: ConstrainedSystem, B: BaseMap>(
 fn lambda_scale<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> f64 {
     let d = ws.d;
     let unit = 1e-3;
-    ws.lambda_probe.fill(unit);
-    ws.y_probe.copy_from_slice(&ws.z0);
-    let (yq, yp) = ws.y_probe.split_at_mut(d);
-    let moved = match ws.fibre.apply(sys, &ws.lambda_probe, yq, yp) {
+    ws.probe.lambda.fill(unit);
+    ws.probe.y.copy_from_slice(&ws.z0);
+    let (yq, yp) = ws.probe.y.split_at_mut(d);
+    let moved = match ws.fibre.apply(sys, &ws.probe.lambda, yq, yp) {
         Ok(()) => ws
-            .y_probe
+            .probe
+            .y
             .iter()
             .zip(&ws.z0)
             .fold(0.0f64, |e, (a, b)| e.max((a - b).abs())),

@@ -57,25 +57,11 @@ pub(crate) struct Workspace {
     pub(crate) piv_j: Vec<usize>,
     /// The band `jac` was factorised with.
     pub(crate) jac_factored: Band,
-    pub(crate) lambda_probe: Vec<f64>,
-    pub(crate) g_probe: Vec<f64>,
-    pub(crate) y_probe: Vec<f64>,
-    pub(crate) dz_probe: Vec<f64>,
-    pub(crate) z1_probe: Vec<f64>,
+    /// The general path's difference quotients of its Jacobian.
+    pub(crate) probe: Probe,
     pub(crate) jv: Vec<f64>,
-    /// The scale of λ for difference quotients (adapted to the system on
-    /// first use: the fibre flow should move z by about √ε_mach ‖z‖).
-    pub(crate) lambda_scale: f64,
-    // The classical path (see `classical`).
-    /// The entries (i, k) of `JACOBIAN_PATTERN` with k < d (∂g_i/∂q_k).
-    pub(crate) cl_pattern: Vec<(usize, usize)>,
-    /// The column group (i mod groups) of each entry of `cl_pattern`.
-    pub(crate) cl_group: Vec<usize>,
-    /// The diagonal of the constant mass matrix A = H_pp when A is
-    /// diagonal (empty otherwise, or when the classical path does not
-    /// apply), and the rows of each column k of G in `cl_pattern` (CSC:
-    /// column k's rows are `cl_col_rows[cl_col_start[k]..cl_col_start[k+1]]`).
-    pub(crate) cl_mass: Vec<f64>,
+    /// The classical path's buffers and structure (`classical`).
+    pub(crate) classical: crate::classical::Buffers,
     /// ‖∂g_i/∂z‖₁ where it was last measured (the state being checked, or
     /// the start of the step): the scale of the constraint tolerance.
     pub(crate) g_size: Vec<f64>,
@@ -84,36 +70,27 @@ pub(crate) struct Workspace {
     pub(crate) polish_keep: Vec<f64>,
     /// Which half of z each g_i reads (`validate::reads`).
     pub(crate) g_reads: Vec<u8>,
-    pub(crate) cl_col_start: Vec<usize>,
-    pub(crate) cl_col_rows: Vec<usize>,
-    /// The terms a_k G1(i, k) G0(j, k) of SHAKE's Jacobian that fall in its
-    /// band (A diagonal), in the order the sum takes them: k, the entry of
-    /// G1 (i + k m), of G0 (j + k m) and of the Jacobian (i + j m).
-    pub(crate) cl_products: Vec<[usize; 4]>,
-    /// −a h ∇V(q0), the first kick.
-    pub(crate) cl_kick: Vec<f64>,
-    /// The momentum increment before the last kick.
-    pub(crate) cl_u: Vec<f64>,
-    /// Scratch vector and `grad_p` output (written only by the system).
-    pub(crate) cl_v: Vec<f64>,
-    pub(crate) cl_w: Vec<f64>,
-    /// `grad_q` output (written only by the system).
-    pub(crate) cl_hq: Vec<f64>,
-    /// The round-off level of each g_i at the step's start.
-    pub(crate) cl_floor: Vec<f64>,
     /// The column of N⁻¹ that the last condition estimate ended on (its
     /// next start; `usize::MAX` for none).
     pub(crate) cond_column: usize,
 }
 
+/// The general SHAKE path's Jacobian by difference quotients (parent
+/// module): the probed multipliers and what the step map gives at them.
+#[derive(Clone, Debug)]
+pub(crate) struct Probe {
+    pub(crate) lambda: Vec<f64>,
+    pub(crate) g: Vec<f64>,
+    pub(crate) y: Vec<f64>,
+    pub(crate) dz: Vec<f64>,
+    pub(crate) z1: Vec<f64>,
+    /// The scale of λ for difference quotients (adapted to the system on
+    /// first use: the fibre flow should move z by about √ε_mach ‖z‖).
+    pub(crate) lambda_scale: f64,
+}
+
 impl Workspace {
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S) -> Self {
-        let mut ws = Self::buffers(sys);
-        ws.cl_products = jacobian_products(&ws);
-        ws
-    }
-
-    fn buffers<S: ConstrainedSystem>(sys: &S) -> Self {
         let d = sys.dof();
         let m = sys.constraint_count();
         let n = 2 * d;
@@ -160,122 +137,22 @@ impl Workspace {
                 .collect(),
             piv_j: vec![0; m.max(1)],
             jac_factored: jac_band,
-            lambda_probe: vec![0.0; m],
-            g_probe: vec![0.0; m],
-            y_probe: vec![0.0; n],
-            dz_probe: vec![0.0; n],
-            z1_probe: vec![0.0; n],
+            probe: Probe {
+                lambda: vec![0.0; m],
+                g: vec![0.0; m],
+                y: vec![0.0; n],
+                dz: vec![0.0; n],
+                z1: vec![0.0; n],
+                lambda_scale: 0.0,
+            },
             jv: vec![0.0; m],
-            lambda_scale: 0.0,
-            cl_pattern: sys
-                .jacobian_pattern()
-                .iter()
-                .copied()
-                .filter(|&(i, k)| i < m && k < d)
-                .collect(),
-            cl_group: sys
-                .jacobian_pattern()
-                .iter()
-                .filter(|&&(i, k)| i < m && k < d)
-                .map(|&(i, _)| i % groups)
-                .collect(),
-            cl_mass: diagonal_mass(sys),
+            classical: crate::classical::Buffers::new(sys, jac_band, groups),
             g_size: vec![0.0; m],
             polish_keep: vec![0.0; 2 * m + 2 * n],
             g_reads: crate::validate::reads(sys.jacobian_pattern(), d, m),
-            cl_col_start: column_starts(sys, d, m),
-            cl_col_rows: column_rows(sys, d, m),
-            cl_products: Vec::new(),
-            cl_kick: vec![0.0; d],
-            cl_u: vec![0.0; d],
-            cl_v: vec![0.0; d],
-            cl_w: vec![0.0; d],
-            cl_hq: vec![0.0; d],
-            cl_floor: vec![0.0; m],
             cond_column: usize::MAX,
         }
     }
-}
-
-/// The diagonal of A = H_pp when H is separable with a quadratic T and A
-/// is diagonal (masses), found by applying `grad_p` (= A p) to the unit
-/// vectors; empty otherwise, and for d > 2048 (d² work to find out).
-fn diagonal_mass<S: ConstrainedSystem>(sys: &S) -> Vec<f64> {
-    let d = sys.dof();
-    if !(sys.separable() && sys.quadratic_kinetic()) || d > 2048 {
-        return Vec::new();
-    }
-    let q = vec![0.5; d];
-    let (mut e, mut w) = (vec![0.0; d], vec![0.0; d]);
-    // T homogeneous: A·0 = 0 (else grad_p is not A p).
-    sys.grad_p(&q, &e, &mut w);
-    if w.iter().any(|&x| x != 0.0) {
-        return Vec::new();
-    }
-    let mut mass = vec![0.0; d];
-    for k in 0..d {
-        e[k] = 1.0;
-        w.fill(0.0);
-        sys.grad_p(&q, &e, &mut w);
-        e[k] = 0.0;
-        if w.iter().enumerate().any(|(j, &x)| j != k && x != 0.0) || !w[k].is_finite() {
-            return Vec::new();
-        }
-        mass[k] = w[k];
-    }
-    mass
-}
-
-/// `cl_col_start` of the classical path: where each column k < d of G
-/// starts in `column_rows`.
-fn column_starts<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize> {
-    let mut start = vec![0usize; d + 1];
-    for &(i, k) in sys.jacobian_pattern() {
-        if i < m && k < d {
-            start[k + 1] += 1;
-        }
-    }
-    for k in 0..d {
-        start[k + 1] += start[k];
-    }
-    start
-}
-
-/// `cl_products`: for each k with a_k ≠ 0 and each pair (i, j) of rows of
-/// G's column k within the Jacobian's band, [k, i + k m, j + k m, i + j m]
-/// (k, then i, then j: the order of the sum it replaces). Empty unless A
-/// is diagonal.
-fn jacobian_products(ws: &Workspace) -> Vec<[usize; 4]> {
-    let (m, band) = (ws.m, ws.jac_band);
-    let mut products = Vec::new();
-    for k in 0..ws.cl_mass.len() {
-        if ws.cl_mass[k] == 0.0 {
-            continue;
-        }
-        let rows = &ws.cl_col_rows[ws.cl_col_start[k]..ws.cl_col_start[k + 1]];
-        for &i in rows {
-            for &j in rows {
-                if i <= j + band.lower && j <= i + band.upper {
-                    products.push([k, i + k * m, j + k * m, i + j * m]);
-                }
-            }
-        }
-    }
-    products
-}
-
-/// The rows of each column k < d of G, column after column.
-fn column_rows<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize> {
-    let start = column_starts(sys, d, m);
-    let mut next = start.clone();
-    let mut rows = vec![0usize; start[d]];
-    for &(i, k) in sys.jacobian_pattern() {
-        if i < m && k < d {
-            rows[next[k]] = i;
-            next[k] += 1;
-        }
-    }
-    rows
 }
 
 /// A value no system computes: entries of a buffer still holding it after a

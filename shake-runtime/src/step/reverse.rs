@@ -124,7 +124,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         std::mem::swap(&mut self.ws, &mut rev.ws);
         std::mem::swap(&mut self.base_ws, &mut rev.base_ws);
         self.ws.n_prev.copy_from_slice(&rev.ws.n_prev);
-        self.ws.lambda_scale = rev.ws.lambda_scale;
+        self.ws.probe.lambda_scale = rev.ws.probe.lambda_scale;
         let guard = self.guard.clone();
         // The step back is judged by where it lands, not by the checks of
         // a forward step: its λ at tiny h is round-off against round-off

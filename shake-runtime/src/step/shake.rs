@@ -141,7 +141,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         // g at the new state was the last residual of SHAKE's iteration
         // (the state is z0 + Δ, rounded once more by the addition); the
         // tolerance's scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step.
-        crate::validate::gradient_sizes(&self.ws.cl_pattern, &self.ws.g_z_y, &mut self.ws.g_size);
+        crate::validate::gradient_sizes(
+            &self.ws.classical.pattern,
+            &self.ws.g_z_y,
+            &mut self.ws.g_size,
+        );
         self.guard.after_shake(
             &self.system,
             q,
