@@ -21,8 +21,8 @@ use crate::base_map::BaseMap;
 use crate::composition::Composition;
 use crate::error::StepError;
 use crate::guard::Guard;
-use crate::shake::Workspace;
 use crate::state::State;
+use crate::step::StepMap;
 use crate::system::ConstrainedSystem;
 use crate::validate;
 
@@ -48,7 +48,6 @@ pub use crate::trajectory::Trajectory;
 #[derive(Clone, Debug)]
 pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     pub(crate) system: S,
-    pub(crate) base: B,
     pub(crate) h: f64,
     pub(crate) method: Method,
     pub(crate) composition: Composition,
@@ -61,21 +60,11 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     /// Every check of a step, with its limits ([`Options`]).
     pub(crate) guard: Guard,
     pub(crate) diagnostics: bool,
-    pub(crate) ws: Workspace,
-    /// The base map's own buffers.
-    pub(crate) base_ws: B::Workspace,
+    /// The substep map (SHAKE, then Π if asked) over the base map, with
+    /// its workspaces.
+    pub(crate) map: StepMap<B>,
     pub(crate) out_q: Vec<f64>,
     pub(crate) out_p: Vec<f64>,
-    /// The kick fractions of the base map when the classical path applies
-    /// (see `classical`), and whether it is used.
-    pub(crate) classical: Option<(f64, f64)>,
-    pub(crate) fast_paths: bool,
-    /// Whether the fast classical path may use the system's fixed-size
-    /// step (`classical::fixed`) when it has one.
-    pub(crate) fixed_size: bool,
-    /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
-    /// (set by the classical step's check and by `begin`).
-    pub(crate) n_fresh: bool,
     /// The last result of `step_in_place`, already checked (with ‖N‖₁
     /// and det N there), so that the next call need not check it again.
     pub(crate) checked: Vec<f64>,
@@ -88,7 +77,7 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     /// The buffers of a composed step's reverse check (see
     /// `step::reverse`), made before the first composed step that needs
     /// them.
-    pub(crate) reverse: Option<crate::step::Reverse<B::Workspace>>,
+    pub(crate) reverse: Option<crate::step::Reverse<B>>,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -102,13 +91,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert_eq!(integ.step_size(), 0.01);
     /// ```
     pub fn new(system: S, base: B, h: f64) -> Self {
-        let ws = Workspace::new(&system);
-        let classical = crate::classical::classical(&system, &base);
         let (d, m) = (system.dof(), system.constraint_count());
-        let base_ws = base.workspace(d);
+        let map = StepMap::new(&system, base);
         Integrator {
             system,
-            base,
             h,
             method: Method::Rattle,
             composition: Composition::SINGLE,
@@ -117,14 +103,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             carry: vec![0.0; 2 * d],
             guard: Guard::new(Options::default()),
             diagnostics: false,
-            ws,
-            base_ws,
+            map,
             out_q: vec![0.0; d],
             out_p: vec![0.0; d],
-            classical,
-            fast_paths: true,
-            fixed_size: true,
-            n_fresh: false,
             checked: vec![0.0; 2 * d],
             checked_valid: false,
             checked_norm: f64::NAN,
@@ -222,7 +203,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(fast.distance(&general) < 1e-15);
     /// ```
     pub fn fast_paths(mut self, on: bool) -> Self {
-        self.fast_paths = on;
+        self.map.fast_paths = on;
         self
     }
 
@@ -244,7 +225,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(fixed.distance(&slices) < 1e-15);
     /// ```
     pub fn fixed_size(mut self, on: bool) -> Self {
-        self.fixed_size = on;
+        self.map.fixed_size = on;
         self
     }
 
@@ -385,7 +366,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert_eq!(*i.base_map(), StormerVerlet);
     /// ```
     pub fn base_map(&self) -> &B {
-        &self.base
+        &self.map.base
     }
 
     /// The multipliers λ of the last SHAKE step: y = exp(Σ λ_i X_{g_i})(z0).
@@ -400,7 +381,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(i.last_multipliers()[0] > 0.0);
     /// ```
     pub fn last_multipliers(&self) -> &[f64] {
-        &self.ws.lambda
+        &self.map.ws.lambda
     }
     pub(crate) fn check_h(&self) -> Result<(), StepError> {
         validate::step_size(self.h)?;
@@ -429,10 +410,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         self.check_h()?;
         self.carry.fill(0.0);
         self.guard
-            .start(&self.system, q, p, &mut self.ws, step, t)?;
+            .start(&self.system, q, p, &mut self.map.ws, step, t)?;
         if self.system.constraint_count() > 0 {
             // `start` factorised N at this q (the classical path reuses it).
-            self.n_fresh = self.classical.is_some();
+            self.map.n_fresh = self.map.classical.is_some();
         }
         if self.reverse_checked() {
             self.reverse_buffers();
@@ -457,7 +438,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     pub fn step_in_place(&mut self, z: &mut State) -> Result<StepInfo, StepError> {
         self.check_dims(z)?;
         let d = self.system.dof();
-        if self.fast_paths
+        if self.map.fast_paths
             && self.checked_valid
             && self.system.constraint_count() > 0
             && z.q.as_slice() == &self.checked[..d]

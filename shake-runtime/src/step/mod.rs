@@ -2,9 +2,9 @@
 //! (Definition 1.2) and their symmetric compositions (Section 4), each a
 //! map z ↦ z′ over a base map φ_h.
 //!
-//! - `shake`: one SHAKE substep, on the general path (the
-//!   Newton iteration on λ of `crate::shake`) or the classical one
-//!   (`crate::classical`), followed by Π for RATTLE;
+//! - `map`: one substep, SHAKE on the general path (the Newton iteration
+//!   on λ of `crate::shake`) or the classical one (`crate::classical`),
+//!   followed by Π for RATTLE: [`StepMap`], which owns its workspaces;
 //! - `reverse`: the check of a composed step by stepping back with −h;
 //! - this file: the composition of substeps γ_k h that makes one step.
 //!
@@ -12,9 +12,10 @@
 //! [`guard`](crate::guard)'s, and the run around it (stride, storage,
 //! observers) is the [`run`](crate::run) driver's.
 
+mod map;
 mod reverse;
-mod shake;
 
+pub(crate) use map::StepMap;
 pub(crate) use reverse::Reverse;
 
 use crate::base_map::BaseMap;
@@ -80,6 +81,31 @@ pub struct StepInfo {
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// One substep of the forward map, of size `h`, with the run's Kahan
+    /// carry (inside a run).
+    pub(crate) fn substep(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        h: f64,
+        project: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<StepInfo, StepError> {
+        let carry = (self.compensated && self.carrying).then_some(self.carry.as_mut_slice());
+        self.map.apply(
+            &self.system,
+            &mut self.guard,
+            q,
+            p,
+            h,
+            project,
+            carry,
+            step,
+            t,
+        )
+    }
+
     /// One step from (q, p), in place: the substeps γ_k h of the
     /// composition (one substep of size h without one), each a SHAKE step,
     /// projected onto M^H unless it is the last one and `project` is false,
@@ -107,7 +133,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         for (k, &gamma) in gammas.iter().enumerate() {
             let info = self.substep(q, p, gamma * self.h, project || k < last, step, t)?;
             if k == 0 && self.diagnostics {
-                self.lead_lambda.copy_from_slice(&self.ws.lambda);
+                self.lead_lambda.copy_from_slice(&self.map.ws.lambda);
             }
             total.shake_iterations += info.shake_iterations;
             total.base_iterations += info.base_iterations;

@@ -22,25 +22,25 @@
 //! det N's sign and λ near its first prediction, so no other check sees it
 //! (`tests/hard_degenerate.rs`, `tests/hard_random_systems.rs`).
 //!
-//! The step back runs on its own workspaces and a copy of the guard, so the
-//! forward step's state (N at the new state, the Kahan carry, the factors
-//! the classical path keeps) is untouched. Its substeps are held only to
+//! The step back runs on its own [`StepMap`] (its own workspaces) and a
+//! copy of the guard, so the forward step's state (N at the new state, the
+//! Kahan carry, the factors the classical path keeps) is untouched. Its substeps are held only to
 //! convergence (finite, on M to round-off): the fibre-jump, component and
 //! condition tests are the forward step's, and the miss is the verdict.
 
 use crate::base_map::BaseMap;
+use crate::composition::Composition;
 use crate::error::StepError;
-use crate::guard::max_abs;
+use crate::guard::{max_abs, Guard};
 use crate::integrator::Integrator;
 use crate::rattle::project_hidden;
-use crate::shake::Workspace;
+use crate::step::StepMap;
 use crate::system::ConstrainedSystem;
 
-/// The buffers of the step back: its own workspaces and the two states.
+/// The step back: its own substep map and the two states.
 #[derive(Clone, Debug)]
-pub(crate) struct Reverse<W> {
-    ws: Workspace,
-    base_ws: W,
+pub(crate) struct Reverse<B: BaseMap> {
+    map: StepMap<B>,
     /// The step's start (q, p), then (if it was not on M^H) Π of it.
     start_q: Vec<f64>,
     start_p: Vec<f64>,
@@ -63,11 +63,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 
     /// Allocates the step back's buffers (once per integrator, before the
     /// first step that needs them).
-    pub(crate) fn reverse_buffers(&mut self) -> &mut Reverse<B::Workspace> {
+    pub(crate) fn reverse_buffers(&mut self) -> &mut Reverse<B> {
         let d = self.system.dof();
+        let forward = &self.map;
         self.reverse.get_or_insert_with(|| Reverse {
-            ws: Workspace::new(&self.system),
-            base_ws: self.base.workspace(d),
+            map: StepMap::new(&self.system, forward.base),
             start_q: vec![0.0; d],
             start_p: vec![0.0; d],
             back_q: vec![0.0; d],
@@ -89,17 +89,16 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         };
         rev.start_q.copy_from_slice(q);
         rev.start_p.copy_from_slice(p);
-        sys.constraints(q, p, &mut rev.ws.g);
-        sys.constraint_jacobian(q, p, &mut rev.ws.g_z_1);
-        crate::validate::gradient_sizes(&rev.ws.pattern, &rev.ws.g_z_1, &mut rev.ws.g_size);
-        rev.start_off = rev
-            .ws
-            .g
-            .iter()
-            .zip(&rev.ws.g_size)
-            .map(|(g, s)| if *g == 0.0 { 0.0 } else { g.abs() / s })
-            .fold(0.0f64, f64::max)
-            * ((2 * d) as f64).sqrt();
+        let ws = &mut rev.map.ws;
+        sys.constraints(q, p, &mut ws.g);
+        sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+        crate::validate::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
+        rev.start_off =
+            ws.g.iter()
+                .zip(&ws.g_size)
+                .map(|(g, s)| if *g == 0.0 { 0.0 } else { g.abs() / s })
+                .fold(0.0f64, f64::max)
+                * ((2 * d) as f64).sqrt();
     }
 
     /// The check: the composed step from the kept start to (q, p), taken
@@ -116,55 +115,66 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         step: u64,
         t: f64,
     ) -> Result<(), StepError> {
-        let Some(mut rev) = self.reverse.take() else {
+        let Some(rev) = self.reverse.as_mut() else {
             return Ok(());
         };
-        // The step back runs in its own workspaces, with a copy of the
-        // guard that knows N at the new state, and no Kahan carry.
-        std::mem::swap(&mut self.ws, &mut rev.ws);
-        std::mem::swap(&mut self.base_ws, &mut rev.base_ws);
-        self.ws.n_prev.copy_from_slice(&rev.ws.n_prev);
-        self.ws.probe.lambda_scale = rev.ws.probe.lambda_scale;
-        let guard = self.guard.clone();
+        // The step back starts from what the forward map knows of the new
+        // state: N there (the guard's fold indicator compares with it) and
+        // the scale of SHAKE's difference quotients.
+        rev.map.ws.n_prev.copy_from_slice(&self.map.ws.n_prev);
+        rev.map.ws.probe.lambda_scale = self.map.ws.probe.lambda_scale;
+        // (And on the same path as the forward map, whatever the builder
+        // set since the buffers were made.)
+        rev.map.fast_paths = self.map.fast_paths;
+        rev.map.fixed_size = self.map.fixed_size;
         // The step back is judged by where it lands, not by the checks of
         // a forward step: its λ at tiny h is round-off against round-off
         // (the fibre-jump test would refuse noise), and a jump of its own
         // shows in the miss. Only its solves must converge.
-        self.guard.options.jump_ratio = f64::INFINITY;
-        self.guard.options.check_component = false;
-        self.guard.options.max_condition = f64::INFINITY;
-        let (carrying, n_fresh) = (self.carrying, self.n_fresh);
-        self.carrying = false;
-        // A system that panics inside the step back must not leave the
-        // integrator with the spare workspace and the loosened checks.
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            self.step_back(&mut rev, q, p, project, start_on_mh, step, t)
-        }));
-        std::mem::swap(&mut self.ws, &mut rev.ws);
-        std::mem::swap(&mut self.base_ws, &mut rev.base_ws);
-        self.guard = guard;
-        (self.carrying, self.n_fresh) = (carrying, n_fresh);
-        self.reverse = Some(rev);
-        outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+        let mut guard = self.guard.clone();
+        guard.options.jump_ratio = f64::INFINITY;
+        guard.options.check_component = false;
+        guard.options.max_condition = f64::INFINITY;
+        let back = Back {
+            system: &self.system,
+            composition: self.composition,
+            h: self.h,
+            step,
+            t,
+        };
+        back.check(rev, &mut guard, q, p, project, start_on_mh)
     }
+}
 
-    #[allow(clippy::too_many_arguments)]
-    fn step_back(
-        &mut self,
-        rev: &mut Reverse<B::Workspace>,
+/// A composed step taken back: the system, the composition and its h, and
+/// the index and time of the step checked (its errors carry them).
+struct Back<'a, S> {
+    system: &'a S,
+    composition: Composition,
+    h: f64,
+    step: u64,
+    t: f64,
+}
+
+impl<S: ConstrainedSystem> Back<'_, S> {
+    /// The substeps of the composition in reverse order with −γ_k h, from
+    /// (q, p) on `rev`'s map, against `rev`'s start.
+    fn check<B: BaseMap>(
+        &self,
+        rev: &mut Reverse<B>,
+        guard: &mut Guard,
         q: &[f64],
         p: &[f64],
         project: bool,
         start_on_mh: bool,
-        step: u64,
-        t: f64,
     ) -> Result<(), StepError> {
+        let (step, t) = (self.step, self.t);
         let gammas = self.composition.coefficients();
         let last = gammas.len() - 1;
         // Relative to the state's size, plus four times the start's
         // distance from M (zero after the first step of a run: every
         // step's result is on M to round-off).
-        let tolerance = self.guard.options.reverse_tolerance
+        let tolerance = guard.options.reverse_tolerance
             * max_abs(&rev.start_q, &rev.start_p).max(max_abs(q, p))
             + 4.0 * rev.start_off;
         let jump = |miss: Option<f64>, cause: Option<StepError>| StepError::BranchJump {
@@ -176,12 +186,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         };
         debug_assert!(gammas.len() >= 2, "only composed steps are stepped back");
         if !start_on_mh {
-            let newton = *self.guard.newton();
+            let newton = *guard.newton();
             project_hidden(
-                &self.system,
+                self.system,
                 &mut rev.start_q,
                 &mut rev.start_p,
-                &mut self.ws,
+                &mut rev.map.ws,
                 &newton,
             )
             .map_err(|e| jump(None, Some(e.at(step, t))))?;
@@ -189,15 +199,19 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         rev.back_q.copy_from_slice(q);
         rev.back_p.copy_from_slice(p);
         for (k, &gamma) in gammas.iter().enumerate().rev() {
-            self.substep(
-                &mut rev.back_q,
-                &mut rev.back_p,
-                -gamma * self.h,
-                project || k < last,
-                step,
-                t,
-            )
-            .map_err(|e| jump(None, Some(e)))?;
+            rev.map
+                .apply(
+                    self.system,
+                    guard,
+                    &mut rev.back_q,
+                    &mut rev.back_p,
+                    -gamma * self.h,
+                    project || k < last,
+                    None,
+                    step,
+                    t,
+                )
+                .map_err(|e| jump(None, Some(e)))?;
         }
         let miss = rev
             .back_q

@@ -1,5 +1,8 @@
-//! One substep: SHAKE of size γh from (q, p) in place, then Π if asked,
-//! each result handed to the [`Guard`](crate::guard).
+//! The substep map: SHAKE S_{γh} from (q, p) in place, then Π if asked
+//! (R_{γh} = Π ∘ S_{γh}), each result handed to the
+//! [`Guard`](crate::guard). [`StepMap`] holds the base map and every
+//! buffer the map needs, so that a second one (the reverse check's) runs
+//! beside the first without touching it.
 //!
 //! Two paths compute the same map (to round-off, `tests/fast_paths.rs`):
 //! the general one, a Newton iteration on λ through the base map and the
@@ -10,38 +13,69 @@
 use crate::base_map::BaseMap;
 use crate::error::StepError;
 use crate::guard::Guard;
-use crate::integrator::Integrator;
 use crate::rattle::project_hidden;
-use crate::shake::shake_step;
+use crate::shake::{shake_step, Workspace};
 use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
 
-impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+/// SHAKE (and Π) over the base map `B`, with its own workspaces.
+#[derive(Clone, Debug)]
+pub(crate) struct StepMap<B: BaseMap> {
+    pub(crate) base: B,
+    /// SHAKE's and Π's buffers, and N at the last checked state.
+    pub(crate) ws: Workspace,
+    /// The base map's own buffers.
+    pub(crate) base_ws: B::Workspace,
+    /// The kick fractions of the base map when the classical path applies
+    /// (see `classical`), and whether it is used.
+    pub(crate) classical: Option<(f64, f64)>,
+    pub(crate) fast_paths: bool,
+    /// Whether the fast classical path may use the system's fixed-size
+    /// step (`classical::fixed`) when it has one.
+    pub(crate) fixed_size: bool,
+    /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
+    /// (set by the classical step's check and by `Integrator::begin`).
+    pub(crate) n_fresh: bool,
+}
+
+impl<B: BaseMap> StepMap<B> {
+    /// The map for `sys` over `base`, its buffers allocated.
+    pub(crate) fn new<S: ConstrainedSystem>(sys: &S, base: B) -> Self {
+        StepMap {
+            ws: Workspace::new(sys),
+            base_ws: base.workspace(sys.dof()),
+            classical: crate::classical::classical(sys, &base),
+            base,
+            fast_paths: true,
+            fixed_size: true,
+            n_fresh: false,
+        }
+    }
+
     /// One SHAKE step of size `h` from (q, p), in place, then (if
-    /// `project`) Π, then the checks.
-    pub(crate) fn substep(
+    /// `project`) Π, then `guard`'s checks. `carry` is Kahan's carry of
+    /// the state inside a run (the increment is added with it), `step`
+    /// and `t` the index and time of the state computed.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn apply<S: ConstrainedSystem>(
         &mut self,
+        sys: &S,
+        guard: &mut Guard,
         q: &mut [f64],
         p: &mut [f64],
         h: f64,
         project: bool,
+        carry: Option<&mut [f64]>,
         step: u64,
         t: f64,
     ) -> Result<StepInfo, StepError> {
         self.n_fresh = false;
         if let (Some(kdk), true) = (self.classical, self.fast_paths) {
-            return self.classical_substep(q, p, h, project, step, t, kdk);
+            return self.classical(sys, guard, q, p, h, project, carry, step, t, kdk);
         }
-        let newton = *self.guard.newton();
-        // Inside a run the increment is added with Kahan's compensation
-        // (its carry is kept across the run's steps).
-        let carry = if self.compensated && self.carrying {
-            Some(self.carry.as_mut_slice())
-        } else {
-            None
-        };
+        let newton = *guard.newton();
         let report = shake_step(
-            &self.system,
+            sys,
             &self.base,
             h,
             q,
@@ -59,13 +93,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             ..StepInfo::default()
         };
         if project {
-            let pr = project_hidden(&self.system, q, p, &mut self.ws, &newton)
-                .map_err(|e| e.at(step, t))?;
+            let pr = project_hidden(sys, q, p, &mut self.ws, &newton).map_err(|e| e.at(step, t))?;
             info.rattle_iterations = pr.iterations;
-            self.guard.after_projection(&pr, h, step, t)?;
+            guard.after_projection(&pr, h, step, t)?;
         }
         Guard::finite(q, p, "state", step, t)?;
-        if self.system.constraint_count() == 0 {
+        if sys.constraint_count() == 0 {
             return Ok(info);
         }
         // Newton's stopping rule looks at the size of its updates, not at
@@ -73,11 +106,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         // huge λ with g ≠ 0. Such a state is refused here: a step never
         // returns a point off M. (The tolerance's scale ‖∂g_i/∂z‖₁ is
         // measured at the new state.)
-        self.system.constraints(q, p, &mut self.ws.g);
-        self.system.constraint_jacobian(q, p, &mut self.ws.g_z_1);
+        sys.constraints(q, p, &mut self.ws.g);
+        sys.constraint_jacobian(q, p, &mut self.ws.g_z_1);
         crate::validate::gradient_sizes(&self.ws.pattern, &self.ws.g_z_1, &mut self.ws.g_size);
-        self.guard.after_shake(
-            &self.system,
+        guard.after_shake(
+            sys,
             q,
             p,
             &mut self.ws,
@@ -91,25 +124,26 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         Ok(info)
     }
 
-    /// [`substep`](Self::substep) on the classical path (see `classical`):
+    /// [`apply`](Self::apply) on the classical path (see `classical`):
     /// SHAKE with its own Newton iteration, then one evaluation and
     /// factorisation of N at the new q for the checks and (if `project`)
     /// for Π, which is one linear solve.
     #[allow(clippy::too_many_arguments)]
-    fn classical_substep(
+    fn classical<S: ConstrainedSystem>(
         &mut self,
+        sys: &S,
+        guard: &mut Guard,
         q: &mut [f64],
         p: &mut [f64],
         h: f64,
         project: bool,
+        mut carry: Option<&mut [f64]>,
         step: u64,
         t: f64,
         kdk: (f64, f64),
     ) -> Result<StepInfo, StepError> {
-        let newton = *self.guard.newton();
-        let carrying = self.compensated && self.carrying;
+        let newton = *guard.newton();
         if self.fixed_size {
-            let carry = carrying.then_some(self.carry.as_mut_slice());
             let cx = crate::classical::fixed::Substep {
                 q: &mut *q,
                 p: &mut *p,
@@ -119,19 +153,17 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 step,
                 t,
                 newton,
-                guard: &mut self.guard,
+                guard: &mut *guard,
                 ws: &mut self.ws,
-                carry,
+                carry: carry.as_deref_mut(),
             };
-            if let Some(result) = self.system.classical_fixed(cx) {
+            if let Some(result) = sys.classical_fixed(cx) {
                 self.n_fresh = result.is_ok();
                 return result;
             }
         }
-        let carry = carrying.then_some(self.carry.as_mut_slice());
-        let report =
-            crate::classical::shake_step(&self.system, kdk, h, q, p, &mut self.ws, &newton, carry)
-                .map_err(|e| e.at(step, t))?;
+        let report = crate::classical::shake_step(sys, kdk, h, q, p, &mut self.ws, &newton, carry)
+            .map_err(|e| e.at(step, t))?;
         let mut info = StepInfo {
             shake_iterations: report.iterations,
             lambda: report.lambda,
@@ -146,8 +178,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             &self.ws.g_z_y,
             &mut self.ws.g_size,
         );
-        self.guard.after_shake(
-            &self.system,
+        guard.after_shake(
+            sys,
             q,
             p,
             &mut self.ws,
@@ -161,7 +193,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         self.n_fresh = true;
         if project {
             // Linear in σ: one solve, no second root to jump to.
-            crate::classical::project(&self.system, q, p, &mut self.ws);
+            crate::classical::project(sys, q, p, &mut self.ws);
             info.rattle_iterations = 1;
         }
         Ok(info)
