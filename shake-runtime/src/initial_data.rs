@@ -31,14 +31,20 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             &self.system,
             z.q.as_slice(),
             z.p.as_slice(),
-            &mut self.map.ws,
+            &mut self.steps.map.ws,
             tol,
         )?;
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
-        project_hidden(&self.system, q, p, &mut self.map.ws, self.guard.newton())?;
+        project_hidden(
+            &self.system,
+            q,
+            p,
+            &mut self.steps.map.ws,
+            self.guard.newton(),
+        )?;
         validate::finite("projected state", q, p)?;
-        validate::on_constraint(&self.system, q, p, &mut self.map.ws, tol)?;
+        validate::on_constraint(&self.system, q, p, &mut self.steps.map.ws, tol)?;
         Ok(out)
     }
 
@@ -68,7 +74,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         // so a state left above g's round-off goes round once more: each
         // round starts closer, and three are more than round-off needs.
         for _ in 0..3 {
-            if let Err(e) = project_constraint(&self.system, q, p, &mut self.map.ws, &opts) {
+            if let Err(e) = project_constraint(&self.system, q, p, &mut self.steps.map.ws, &opts) {
                 // Gauss–Newton could not bring the point onto M: say how
                 // far it got, for which constraint, and why it stopped.
                 let cause = match e {
@@ -77,16 +83,16 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 };
                 return Err(self.off_m(q, p, cause));
             }
-            project_hidden(&self.system, q, p, &mut self.map.ws, &opts)?;
+            project_hidden(&self.system, q, p, &mut self.steps.map.ws, &opts)?;
             validate::finite("projected state", q, p)?;
-            if g_at_roundoff(&self.system, q, p, &mut self.map.ws) {
+            if g_at_roundoff(&self.system, q, p, &mut self.steps.map.ws) {
                 break;
             }
         }
         if self.system.constraint_count() > 0 {
             let tol = self.guard.options.constraint_tolerance;
-            validate::on_constraint(&self.system, q, p, &mut self.map.ws, tol)?;
-            let nd = check_nondegeneracy(&self.system, q, p, &mut self.map.ws);
+            validate::on_constraint(&self.system, q, p, &mut self.steps.map.ws, tol)?;
+            let nd = check_nondegeneracy(&self.system, q, p, &mut self.steps.map.ws);
             if nd.inverse_norm.is_infinite() {
                 return Err(StepError::SingularNondegeneracyMatrix {
                     stage: Stage::Rattle,
@@ -108,7 +114,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     ) -> StepError {
         let tol = self.guard.options.constraint_tolerance;
         let (residual, i, tolerance) = if self.system.constraint_count() > 0 {
-            validate::furthest_off(&self.system, q, p, &mut self.map.ws, tol)
+            validate::furthest_off(&self.system, q, p, &mut self.steps.map.ws, tol)
         } else {
             (0.0, 0, tol)
         };

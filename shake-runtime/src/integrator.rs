@@ -22,7 +22,7 @@ use crate::composition::Composition;
 use crate::error::StepError;
 use crate::guard::Guard;
 use crate::state::State;
-use crate::step::StepMap;
+use crate::step::{Composed, StepMap};
 use crate::system::ConstrainedSystem;
 use crate::validate;
 
@@ -50,7 +50,6 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     pub(crate) system: S,
     pub(crate) h: f64,
     pub(crate) method: Method,
-    pub(crate) composition: Composition,
     /// Kahan summation of the state in runs (see `compensated`).
     pub(crate) compensated: bool,
     /// True inside a run (single steps have no carry to keep).
@@ -60,9 +59,9 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     /// Every check of a step, with its limits ([`Options`]).
     pub(crate) guard: Guard,
     pub(crate) diagnostics: bool,
-    /// The substep map (SHAKE, then Π if asked) over the base map, with
-    /// its workspaces.
-    pub(crate) map: StepMap<B>,
+    /// The step map: the composition of substeps (SHAKE, then Π if asked)
+    /// over the base map, with its workspaces and its reverse check.
+    pub(crate) steps: Composed<B>,
     pub(crate) out_q: Vec<f64>,
     pub(crate) out_p: Vec<f64>,
     /// The last result of `step_in_place`, already checked (with ‖N‖₁
@@ -71,13 +70,6 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     pub(crate) checked_valid: bool,
     pub(crate) checked_norm: f64,
     pub(crate) checked_det: f64,
-    /// λ of the first substep of the last composed step (kept only with
-    /// diagnostics): the multiplier of the step leaving the state.
-    pub(crate) lead_lambda: Vec<f64>,
-    /// The buffers of a composed step's reverse check (see
-    /// `step::reverse`), made before the first composed step that needs
-    /// them.
-    pub(crate) reverse: Option<crate::step::Reverse<B>>,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -92,26 +84,23 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn new(system: S, base: B, h: f64) -> Self {
         let (d, m) = (system.dof(), system.constraint_count());
-        let map = StepMap::new(&system, base);
+        let steps = Composed::new(StepMap::new(&system, base), m);
         Integrator {
             system,
             h,
             method: Method::Rattle,
-            composition: Composition::SINGLE,
             compensated: true,
             carrying: false,
             carry: vec![0.0; 2 * d],
             guard: Guard::new(Options::default()),
             diagnostics: false,
-            map,
+            steps,
             out_q: vec![0.0; d],
             out_p: vec![0.0; d],
             checked: vec![0.0; 2 * d],
             checked_valid: false,
             checked_norm: f64::NAN,
             checked_det: f64::NAN,
-            lead_lambda: vec![0.0; m],
-            reverse: None,
         }
     }
 
@@ -160,7 +149,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert_eq!(i.composition(), Composition::YOSHIDA_6);
     /// ```
     pub fn composed(mut self, c: Composition) -> Self {
-        self.composition = c;
+        self.steps.composition = c;
         self
     }
 
@@ -203,7 +192,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(fast.distance(&general) < 1e-15);
     /// ```
     pub fn fast_paths(mut self, on: bool) -> Self {
-        self.map.fast_paths = on;
+        self.steps.map.fast_paths = on;
         self
     }
 
@@ -225,7 +214,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(fixed.distance(&slices) < 1e-15);
     /// ```
     pub fn fixed_size(mut self, on: bool) -> Self {
-        self.map.fixed_size = on;
+        self.steps.map.fixed_size = on;
         self
     }
 
@@ -247,7 +236,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).composition(), Composition::SINGLE);
     /// ```
     pub fn composition(&self) -> Composition {
-        self.composition
+        self.steps.composition
     }
 
     /// The order of a step as an approximation of the exact flow on M^H:
@@ -273,10 +262,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         } else {
             B::ORDER.min(2)
         };
-        if self.composition.stages() == 1 || !B::SYMMETRIC {
+        if self.steps.composition.stages() == 1 || !B::SYMMETRIC {
             single
         } else {
-            self.composition.order()
+            self.steps.composition.order()
         }
     }
 
@@ -366,7 +355,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert_eq!(*i.base_map(), StormerVerlet);
     /// ```
     pub fn base_map(&self) -> &B {
-        &self.map.base
+        &self.steps.map.base
     }
 
     /// The multipliers λ of the last SHAKE step: y = exp(Σ λ_i X_{g_i})(z0).
@@ -381,7 +370,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(i.last_multipliers()[0] > 0.0);
     /// ```
     pub fn last_multipliers(&self) -> &[f64] {
-        &self.map.ws.lambda
+        &self.steps.map.ws.lambda
     }
     pub(crate) fn check_h(&self) -> Result<(), StepError> {
         validate::step_size(self.h)?;
@@ -410,13 +399,13 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         self.check_h()?;
         self.carry.fill(0.0);
         self.guard
-            .start(&self.system, q, p, &mut self.map.ws, step, t)?;
+            .start(&self.system, q, p, &mut self.steps.map.ws, step, t)?;
         if self.system.constraint_count() > 0 {
             // `start` factorised N at this q (the classical path reuses it).
-            self.map.n_fresh = self.map.classical.is_some();
+            self.steps.map.n_fresh = self.steps.map.classical.is_some();
         }
-        if self.reverse_checked() {
-            self.reverse_buffers();
+        if self.steps.reverse_checked(&self.system, &self.guard) {
+            self.steps.reverse_buffers(&self.system);
         }
         Ok(())
     }
@@ -438,7 +427,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     pub fn step_in_place(&mut self, z: &mut State) -> Result<StepInfo, StepError> {
         self.check_dims(z)?;
         let d = self.system.dof();
-        if self.map.fast_paths
+        if self.steps.map.fast_paths
             && self.checked_valid
             && self.system.constraint_count() > 0
             && z.q.as_slice() == &self.checked[..d]

@@ -369,7 +369,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         // they meet: this run's, not whatever an earlier run on this
         // integrator started from (an ensemble reuses one integrator per
         // thread; a member's result must not depend on its neighbours).
-        integ.map.ws.probe.lambda_scale = 0.0;
+        integ.steps.map.ws.probe.lambda_scale = 0.0;
         if let Err(e) = integ.begin(&q, &p, 0, t0) {
             return fail(traj, e);
         }
@@ -382,7 +382,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 &integ.system,
                 &mut q,
                 &mut p,
-                &mut integ.map.ws,
+                &mut integ.steps.map.ws,
                 integ.guard.newton(),
             ) {
                 return fail(traj, e.at(0, t0));

@@ -22,10 +22,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// record's λ is RATTLE's, from the state on M^H.
     pub(super) fn fill_leaving_lambda(&mut self, traj: &mut Trajectory, per_step: bool) {
         let m = self.system.constraint_count();
-        let lead = if self.composition.stages() == 1 {
-            &self.map.ws.lambda
+        let lead = if self.steps.composition.stages() == 1 {
+            &self.steps.map.ws.lambda
         } else {
-            &self.lead_lambda
+            &self.steps.lead_lambda
         };
         let subtract = self.method == Method::Rattle && !per_step;
         if let Some((lambda, sigma)) = traj.last_multipliers_mut() {
@@ -112,13 +112,17 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         scratch.q.as_mut_slice().copy_from_slice(q);
         scratch.p.as_mut_slice().copy_from_slice(p);
         let mut rattle_iterations = 0;
-        if self.method == Method::Rattle && !projected && self.map.n_fresh && self.map.fast_paths {
+        if self.method == Method::Rattle
+            && !projected
+            && self.steps.map.n_fresh
+            && self.steps.map.fast_paths
+        {
             // The classical path: N at this q is factorised and checked.
             crate::classical::project(
                 &self.system,
                 scratch.q.as_slice(),
                 scratch.p.as_mut_slice(),
-                &mut self.map.ws,
+                &mut self.steps.map.ws,
             );
             rattle_iterations = 1;
         } else if self.method == Method::Rattle && !projected {
@@ -126,7 +130,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 &self.system,
                 scratch.q.as_mut_slice(),
                 scratch.p.as_mut_slice(),
-                &mut self.map.ws,
+                &mut self.steps.map.ws,
                 self.guard.newton(),
             )
             .map_err(|e| e.at(k, t))?;
@@ -138,7 +142,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 &self.system,
                 scratch.q.as_slice(),
                 scratch.p.as_slice(),
-                &mut self.map.ws,
+                &mut self.steps.map.ws,
                 &pr,
                 self.h,
                 k,
@@ -157,11 +161,11 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());
             let (mut constraint, mut hidden) = (0.0, 0.0);
             if self.system.constraint_count() > 0 {
-                self.system.constraints(sq, sp, &mut self.map.ws.g);
+                self.system.constraints(sq, sp, &mut self.steps.map.ws.g);
                 self.system
-                    .hidden_constraints(sq, sp, &mut self.map.ws.hidden);
-                constraint = norm_inf(&self.map.ws.g);
-                hidden = norm_inf(&self.map.ws.hidden);
+                    .hidden_constraints(sq, sp, &mut self.steps.map.ws.hidden);
+                constraint = norm_inf(&self.steps.map.ws.g);
+                hidden = norm_inf(&self.steps.map.ws.hidden);
             }
             traj.diagnostics.push(DiagnosticRecord {
                 step: k,
@@ -179,7 +183,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             // (projected) by the last substep; λ is known only once the
             // step leaving the state is taken (`execute` fills it in).
             traj.push_multipliers(
-                (self.method == Method::Rattle).then_some(self.map.ws.sigma.as_slice()),
+                (self.method == Method::Rattle).then_some(self.steps.map.ws.sigma.as_slice()),
             );
             *acc = Accumulator::default();
         }

@@ -6,7 +6,8 @@
 //!   on λ of `crate::shake`) or the classical one (`crate::classical`),
 //!   followed by Π for RATTLE: [`StepMap`], which owns its workspaces;
 //! - `reverse`: the check of a composed step by stepping back with −h;
-//! - this file: the composition of substeps γ_k h that makes one step.
+//! - this file: [`Composed`], the composition of substeps γ_k h that makes
+//!   one step.
 //!
 //! A step map only computes; every check on its result is the
 //! [`guard`](crate::guard)'s, and the run around it (stride, storage,
@@ -19,7 +20,9 @@ pub(crate) use map::StepMap;
 pub(crate) use reverse::Reverse;
 
 use crate::base_map::BaseMap;
+use crate::composition::Composition;
 use crate::error::StepError;
+use crate::guard::Guard;
 use crate::integrator::Integrator;
 use crate::system::ConstrainedSystem;
 
@@ -80,59 +83,79 @@ pub struct StepInfo {
     pub fold: f64,
 }
 
-impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
-    /// One substep of the forward map, of size `h`, with the run's Kahan
-    /// carry (inside a run).
-    pub(crate) fn substep(
-        &mut self,
-        q: &mut [f64],
-        p: &mut [f64],
-        h: f64,
-        project: bool,
-        step: u64,
-        t: f64,
-    ) -> Result<StepInfo, StepError> {
-        let carry = (self.compensated && self.carrying).then_some(self.carry.as_mut_slice());
-        self.map.apply(
-            &self.system,
-            &mut self.guard,
-            q,
-            p,
-            h,
-            project,
-            carry,
-            step,
-            t,
-        )
+/// One step of the integrator: the substeps γ_k h of a composition (one
+/// substep of size h without one) on a [`StepMap`], and the reverse check
+/// of composed steps (`reverse`) on a second one.
+#[derive(Clone, Debug)]
+pub(crate) struct Composed<B: BaseMap> {
+    pub(crate) composition: Composition,
+    pub(crate) map: StepMap<B>,
+    /// The buffers of a composed step's reverse check, made before the
+    /// first composed step that needs them.
+    pub(crate) reverse: Option<Reverse<B>>,
+    /// λ of the first substep of the last composed step (kept only with
+    /// diagnostics): the multiplier of the step leaving the state.
+    pub(crate) lead_lambda: Vec<f64>,
+}
+
+/// Where a step runs: inside a run (`carry`, Kahan's carry of the state,
+/// when the run is compensated), with diagnostics or not, and the index
+/// and time of the state it computes.
+pub(crate) struct Within<'a> {
+    pub(crate) carry: Option<&'a mut [f64]>,
+    pub(crate) in_run: bool,
+    pub(crate) diagnostics: bool,
+    pub(crate) step: u64,
+    pub(crate) t: f64,
+}
+
+impl<B: BaseMap> Composed<B> {
+    /// The single step over `map` for a system of m constraints.
+    pub(crate) fn new(map: StepMap<B>, m: usize) -> Self {
+        Composed {
+            composition: Composition::SINGLE,
+            map,
+            reverse: None,
+            lead_lambda: vec![0.0; m],
+        }
     }
 
-    /// One step from (q, p), in place: the substeps γ_k h of the
-    /// composition (one substep of size h without one), each a SHAKE step,
-    /// projected onto M^H unless it is the last one and `project` is false,
-    /// and each checked. `step` is the index of the new state, `t` the time
-    /// t0 + k·h of the state it computes. Iteration counts are summed over the
-    /// substeps, ‖λ‖ and the condition of N are the largest.
-    pub(crate) fn advance(
+    /// One step of size `h` from (q, p), in place: the substeps γ_k h of
+    /// the composition, each a SHAKE step, projected onto M^H unless it is
+    /// the last one and `project` is false, and each checked by `guard`.
+    /// Iteration counts are summed over the substeps, ‖λ‖ and the
+    /// condition of N are the largest.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn advance<S: ConstrainedSystem>(
         &mut self,
+        sys: &S,
+        guard: &mut Guard,
+        h: f64,
         q: &mut [f64],
         p: &mut [f64],
         project: bool,
-        step: u64,
-        t: f64,
+        mut at: Within<'_>,
     ) -> Result<StepInfo, StepError> {
+        let (step, t) = (at.step, at.t);
         let gammas = self.composition.coefficients();
         if gammas.len() == 1 {
-            return self.substep(q, p, self.h, project, step, t);
+            return self
+                .map
+                .apply(sys, guard, q, p, h, project, at.carry, step, t);
         }
         let last = gammas.len() - 1;
-        let reverse = self.reverse_checked();
+        let reverse = self.reverse_checked(sys, guard);
         if reverse {
-            self.keep_start(q, p);
+            self.keep_start(sys, q, p);
         }
         let mut total = StepInfo::default();
         for (k, &gamma) in gammas.iter().enumerate() {
-            let info = self.substep(q, p, gamma * self.h, project || k < last, step, t)?;
-            if k == 0 && self.diagnostics {
+            let project_k = project || k < last;
+            let carry = at.carry.as_deref_mut();
+            let info = self
+                .map
+                .apply(sys, guard, q, p, gamma * h, project_k, carry, step, t)?;
+            if k == 0 && at.diagnostics {
                 self.lead_lambda.copy_from_slice(&self.map.ws.lambda);
             }
             total.shake_iterations += info.shake_iterations;
@@ -147,9 +170,34 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             // Inside a run with every step projected the start is on M^H;
             // elsewhere (a lazy run, SHAKE, a single step from a state of
             // the caller's) the step back returns Π of it.
-            let start_on_mh = project && self.carrying;
-            self.reverse(q, p, project, start_on_mh, step, t)?;
+            let start_on_mh = project && at.in_run;
+            self.reverse(sys, guard, h, q, p, project, start_on_mh, step, t)?;
         }
         Ok(total)
+    }
+}
+
+impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// One step from (q, p), in place ([`Composed::advance`]), with this
+    /// integrator's system, guard, h, and (inside a run) Kahan carry.
+    /// `step` is the index of the new state, `t` the time t0 + k·h of the
+    /// state it computes.
+    pub(crate) fn advance(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        project: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<StepInfo, StepError> {
+        let at = Within {
+            carry: (self.compensated && self.carrying).then_some(self.carry.as_mut_slice()),
+            in_run: self.carrying,
+            diagnostics: self.diagnostics,
+            step,
+            t,
+        };
+        self.steps
+            .advance(&self.system, &mut self.guard, self.h, q, p, project, at)
     }
 }

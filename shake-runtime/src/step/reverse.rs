@@ -32,9 +32,8 @@ use crate::base_map::BaseMap;
 use crate::composition::Composition;
 use crate::error::StepError;
 use crate::guard::{max_abs, Guard};
-use crate::integrator::Integrator;
 use crate::rattle::project_hidden;
-use crate::step::StepMap;
+use crate::step::{Composed, StepMap};
 use crate::system::ConstrainedSystem;
 
 /// The step back: its own substep map and the two states.
@@ -51,23 +50,23 @@ pub(crate) struct Reverse<B: BaseMap> {
     start_off: f64,
 }
 
-impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+impl<B: BaseMap> Composed<B> {
     /// Whether composed steps are checked by stepping back: a composition
     /// over a symmetric base map, constraints, and a finite tolerance.
-    pub(crate) fn reverse_checked(&self) -> bool {
+    pub(crate) fn reverse_checked<S: ConstrainedSystem>(&self, sys: &S, guard: &Guard) -> bool {
         self.composition.stages() > 1
             && B::SYMMETRIC
-            && self.system.constraint_count() > 0
-            && self.guard.options.reverse_tolerance.is_finite()
+            && sys.constraint_count() > 0
+            && guard.options.reverse_tolerance.is_finite()
     }
 
     /// Allocates the step back's buffers (once per integrator, before the
     /// first step that needs them).
-    pub(crate) fn reverse_buffers(&mut self) -> &mut Reverse<B> {
-        let d = self.system.dof();
-        let forward = &self.map;
+    pub(crate) fn reverse_buffers<S: ConstrainedSystem>(&mut self, sys: &S) -> &mut Reverse<B> {
+        let d = sys.dof();
+        let base = self.map.base;
         self.reverse.get_or_insert_with(|| Reverse {
-            map: StepMap::new(&self.system, forward.base),
+            map: StepMap::new(sys, base),
             start_q: vec![0.0; d],
             start_p: vec![0.0; d],
             back_q: vec![0.0; d],
@@ -81,12 +80,9 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// through off M (initial data) is not returned to by the step back,
     /// whose states are on M; it lands about that distance away,
     /// √(2d) · max_i |g_i| / ‖∂g_i/∂z‖₁ ≥ |g_i| / ‖∇g_i‖₂.
-    pub(crate) fn keep_start(&mut self, q: &[f64], p: &[f64]) {
-        self.reverse_buffers();
-        let (sys, d) = (&self.system, self.system.dof());
-        let Some(rev) = self.reverse.as_mut() else {
-            return;
-        };
+    pub(crate) fn keep_start<S: ConstrainedSystem>(&mut self, sys: &S, q: &[f64], p: &[f64]) {
+        let d = sys.dof();
+        let rev = self.reverse_buffers(sys);
         rev.start_q.copy_from_slice(q);
         rev.start_p.copy_from_slice(p);
         let ws = &mut rev.map.ws;
@@ -106,8 +102,12 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ‖z₁‖∞) of the start (of Π of it when `start_on_mh` is false).
     /// `project` is the forward step's: whether its last substep was
     /// projected.
-    pub(crate) fn reverse(
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn reverse<S: ConstrainedSystem>(
         &mut self,
+        sys: &S,
+        guard: &Guard,
+        h: f64,
         q: &[f64],
         p: &[f64],
         project: bool,
@@ -131,14 +131,14 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         // a forward step: its λ at tiny h is round-off against round-off
         // (the fibre-jump test would refuse noise), and a jump of its own
         // shows in the miss. Only its solves must converge.
-        let mut guard = self.guard.clone();
+        let mut guard = guard.clone();
         guard.options.jump_ratio = f64::INFINITY;
         guard.options.check_component = false;
         guard.options.max_condition = f64::INFINITY;
         let back = Back {
-            system: &self.system,
+            system: sys,
             composition: self.composition,
-            h: self.h,
+            h,
             step,
             t,
         };
