@@ -4,9 +4,9 @@
 //!
 //! - `map`: one substep, SHAKE on the general path (the Newton iteration
 //!   on λ of `crate::shake`) or the classical one (`crate::classical`),
-//!   followed by Π for RATTLE: [`StepMap`], which owns its workspaces;
+//!   followed by Π for RATTLE: `StepMap`, which owns its workspaces;
 //! - `reverse`: the check of a composed step by stepping back with −h;
-//! - this file: [`Composed`], the composition of substeps γ_k h that makes
+//! - this file: `Composed`, the composition of substeps γ_k h that makes
 //!   one step.
 //!
 //! A step map only computes; every check on its result is the
