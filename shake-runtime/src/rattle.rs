@@ -98,7 +98,7 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
                 },
             ));
         }
-        sys.nondegeneracy_matrix(&ws.z1[..d], &ws.z1[d..], &mut ws.n_mat);
+        sys.nondegeneracy_matrix(&ws.z1[..d], &ws.z1[d..], &mut ws.n.mat);
         factor_n(ws).map_err(|_| {
             StepError::from_solve(
                 Stage::Rattle,
@@ -277,16 +277,16 @@ impl NondegeneracyCheck {
     }
 }
 
-/// Copies N (in `ws.n_mat`) into `ws.jac` and factorises it there, within
-/// its structural band `ws.n_band` when that is narrower than the matrix:
+/// Copies N (in `ws.n.mat`) into `ws.jac` and factorises it there, within
+/// its structural band `ws.n.band` when that is narrower than the matrix:
 /// O(m b²) for a chain instead of O(m²) passes over a dense m×m buffer.
 /// The band is recorded in the spare slots of `ws.piv`, so `lu_solve` and
 /// the condition estimate use the banded factors.
 fn factor_n(ws: &mut Workspace) -> Result<(), Singular> {
     let m = ws.m;
-    let band = ws.n_band;
+    let band = ws.n.band;
     if band == Band::full(m) {
-        ws.jac.copy_from_slice(&ws.n_mat);
+        ws.jac.copy_from_slice(&ws.n.mat);
         return lu_factor(&mut ws.jac, m, &mut ws.piv);
     }
     // The band and the fill of the banded LU (rows j − l − u ..= j + l of
@@ -298,7 +298,7 @@ fn factor_n(ws: &mut Workspace) -> Result<(), Singular> {
         zero_short(&mut ws.jac[lo + col..top + col]);
         copy_short(
             &mut ws.jac[top + col..=hi + col],
-            &ws.n_mat[top + col..=hi + col],
+            &ws.n.mat[top + col..=hi + col],
         );
     }
     band_lu_factor(&mut ws.jac, m, band, &mut ws.piv)?;
@@ -320,17 +320,17 @@ fn band_norm1(a: &[f64], m: usize, band: Band) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// ‖N − N_prev‖₁ within N's band (`ws.n_mat` against `ws.n_prev`), then
+/// ‖N − N_prev‖₁ within N's band (`ws.n.mat` against `ws.n.prev`), then
 /// N_prev ← N: how much N changed since the last checked state.
 pub(crate) fn n_change(ws: &mut Workspace) -> f64 {
-    let (m, band) = (ws.m, ws.n_band);
+    let (m, band) = (ws.m, ws.n.band);
     let mut worst = 0.0f64;
     for j in 0..m {
         let (top, hi) = (j.saturating_sub(band.upper), (j + band.lower).min(m - 1));
         let mut column = 0.0;
         for k in top + j * m..=hi + j * m {
-            column += (ws.n_mat[k] - ws.n_prev[k]).abs();
-            ws.n_prev[k] = ws.n_mat[k];
+            column += (ws.n.mat[k] - ws.n.prev[k]).abs();
+            ws.n.prev[k] = ws.n.mat[k];
         }
         worst = worst.max(column);
     }
@@ -344,16 +344,16 @@ pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
     p: &[f64],
     ws: &mut Workspace,
 ) -> NondegeneracyCheck {
-    sys.nondegeneracy_matrix(q, p, &mut ws.n_mat);
+    sys.nondegeneracy_matrix(q, p, &mut ws.n.mat);
     factor_and_check(ws, None)
 }
 
-/// Factorises N (already in `ws.n_mat`) and checks it: det N, ‖N‖₁ and
+/// Factorises N (already in `ws.n.mat`) and checks it: det N, ‖N‖₁ and
 /// ‖N⁻¹‖₁, estimated by Hager's method for m ≥ 2 unless `bound` gives an
 /// upper bound of it already (see `Guard::judge_shake`).
 pub(crate) fn factor_and_check(ws: &mut Workspace, bound: Option<f64>) -> NondegeneracyCheck {
     let m = ws.m;
-    let norm = band_norm1(&ws.n_mat, m, ws.n_band);
+    let norm = band_norm1(&ws.n.mat, m, ws.n.band);
     if !norm.is_finite() {
         return NondegeneracyCheck {
             det: f64::NAN,
@@ -382,9 +382,9 @@ pub(crate) fn factor_and_check(ws: &mut Workspace, bound: Option<f64>) -> Nondeg
                     &ws.jac,
                     m,
                     &ws.piv,
-                    &mut ws.s1,
-                    &mut ws.s2,
-                    &mut ws.cond_column,
+                    &mut ws.n.s1,
+                    &mut ws.n.s2,
+                    &mut ws.n.cond_column,
                 ),
             },
         },

@@ -347,9 +347,9 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     // As `check_nondegeneracy` and `n_change` leave the workspace: N
     // factorised in `jac` (for the lazy Π of `classical::project`), N in
     // `n_mat` and `n_prev`.
-    let change = (n - ws.n_prev[0]).abs();
-    ws.n_prev[0] = n;
-    ws.n_mat[0] = n;
+    let change = (n - ws.n.prev[0]).abs();
+    ws.n.prev[0] = n;
+    ws.n.mat[0] = n;
     ws.jac[0] = n;
     guard.judge_shake(&nd, change, &report, &mut info, cx.project, h, step, t)?;
     if cx.project {

@@ -49,7 +49,7 @@ pub(crate) struct Guard {
     det_prev: f64,
     /// ‖N‖₁ at the result of the last substep.
     last_norm: f64,
-    /// Whether `ws.n_prev` holds N at the last checked state.
+    /// Whether `ws.n.prev` holds N at the last checked state.
     n_prev_valid: bool,
     /// ‖N⁻¹‖₁ at the last checked state as the check used it (an
     /// estimate or a bound from one, see `inverse_bound`), and the last
@@ -213,7 +213,7 @@ impl Guard {
             step,
             t,
         )?;
-        sys.nondegeneracy_matrix(q, p, &mut ws.n_mat);
+        sys.nondegeneracy_matrix(q, p, &mut ws.n.mat);
         let change = n_change(ws);
         let bound = self.inverse_bound(change);
         let mut nd = factor_and_check(ws, bound);

@@ -33,22 +33,16 @@ pub(crate) struct Workspace {
     pub(crate) g_z_y: Vec<f64>,
     pub(crate) g_z_1: Vec<f64>,
     pub(crate) hidden: Vec<f64>,
-    pub(crate) n_mat: Vec<f64>,
-    /// N at the previous checked state, within N's band (the fold
-    /// indicator of `Guard::after_shake` compares the two).
-    pub(crate) n_prev: Vec<f64>,
-    // Our matrices.
+    /// N = {{H,g_i},g_j} and what its check keeps (`rattle`).
+    pub(crate) n: NBuffers,
+    // Our matrices: SHAKE's Jacobian, or N, factorised.
     pub(crate) jac: Vec<f64>,
     pub(crate) piv: Vec<usize>,
-    pub(crate) s1: Vec<f64>,
-    pub(crate) s2: Vec<f64>,
     // Projection onto M (initial data).
     pub(crate) gram: Vec<f64>,
     // SHAKE's structured Jacobian.
     /// The predicted band of SHAKE's Jacobian (full for small m).
     pub(crate) jac_band: Band,
-    /// The structural band of N (full for small m, or when it does not pay).
-    pub(crate) n_band: Band,
     /// Columns evaluated together: j ≡ c (mod groups).
     pub(crate) groups: usize,
     /// The rows (i, k) of the macro's `JACOBIAN_PATTERN`, for sparse
@@ -70,6 +64,22 @@ pub(crate) struct Workspace {
     pub(crate) polish_keep: Vec<f64>,
     /// Which half of z each g_i reads (`validate::reads`).
     pub(crate) g_reads: Vec<u8>,
+}
+
+/// N = {{H,g_i},g_j} at the state being checked, at the previous one, and
+/// the buffers of its condition estimate.
+#[derive(Clone, Debug)]
+pub(crate) struct NBuffers {
+    /// N, as the system writes it.
+    pub(crate) mat: Vec<f64>,
+    /// N at the previous checked state, within N's band (the fold
+    /// indicator of `Guard::after_shake` compares the two).
+    pub(crate) prev: Vec<f64>,
+    /// The structural band of N (full for small m, or when it does not pay).
+    pub(crate) band: Band,
+    /// Hager's two vectors.
+    pub(crate) s1: Vec<f64>,
+    pub(crate) s2: Vec<f64>,
     /// The column of N⁻¹ that the last condition estimate ended on (its
     /// next start; `usize::MAX` for none).
     pub(crate) cond_column: usize,
@@ -118,16 +128,19 @@ impl Workspace {
             g_z_y: vec![0.0; m * n],
             g_z_1: vec![0.0; m * n],
             hidden: vec![0.0; m],
-            n_mat: vec![0.0; m * m],
-            n_prev: vec![0.0; m * m],
+            n: NBuffers {
+                mat: vec![0.0; m * m],
+                prev: vec![0.0; m * m],
+                band: structural_band_of_n(sys),
+                s1: vec![0.0; m.max(1)],
+                s2: vec![0.0; m.max(1)],
+                cond_column: usize::MAX,
+            },
             jac: vec![0.0; m * m],
             // Two spare slots: `lu_factor` records a band there (linalg).
             piv: vec![0; m + 2],
-            s1: vec![0.0; m.max(1)],
-            s2: vec![0.0; m.max(1)],
             gram: vec![0.0; m * m],
             jac_band,
-            n_band: structural_band_of_n(sys),
             groups,
             pattern: sys
                 .jacobian_pattern()
@@ -150,7 +163,6 @@ impl Workspace {
             g_size: vec![0.0; m],
             polish_keep: vec![0.0; 2 * m + 2 * n],
             g_reads: crate::validate::reads(sys.jacobian_pattern(), d, m),
-            cond_column: usize::MAX,
         }
     }
 }

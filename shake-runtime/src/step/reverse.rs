@@ -121,7 +121,7 @@ impl<B: BaseMap> Composed<B> {
         // The step back starts from what the forward map knows of the new
         // state: N there (the guard's fold indicator compares with it) and
         // the scale of SHAKE's difference quotients.
-        rev.map.ws.n_prev.copy_from_slice(&self.map.ws.n_prev);
+        rev.map.ws.n.prev.copy_from_slice(&self.map.ws.n.prev);
         rev.map.ws.probe.lambda_scale = self.map.ws.probe.lambda_scale;
         // (And on the same path as the forward map, whatever the builder
         // set since the buffers were made.)
