@@ -130,7 +130,7 @@ fn jacobian<S: ConstrainedSystem>(
         // outer products of G's sparse columns, with no call to `grad_p`
         // and no column groups (a chain: 4 products per variable).
         // (The terms in the band are listed once per system, in the
-        // order of this sum: `Workspace::cl_products`.)
+        // order of this sum: `Buffers::products`.)
         for &[k, g1, g0, at] in &ws.classical.products {
             let gi = (h * ws.classical.mass[k]) * ws.g_z_1[g1];
             ws.jac[at] -= gi * ws.g_z_y[g0];
