@@ -346,7 +346,7 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     };
     // As `check_nondegeneracy` and `n_change` leave the workspace: N
     // factorised in `jac` (for the lazy Π of `classical::project`), N in
-    // `n_mat` and `n_prev`.
+    // `n.mat` and `n.prev`.
     let change = (n - ws.n.prev[0]).abs();
     ws.n.prev[0] = n;
     ws.n.mat[0] = n;

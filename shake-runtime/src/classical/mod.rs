@@ -132,8 +132,12 @@ fn jacobian<S: ConstrainedSystem>(
         // (The terms in the band are listed once per system, in the
         // order of this sum: `Buffers::products`.)
         for &[k, g1, g0, at] in &ws.classical.products {
-            let gi = (h * ws.classical.mass[k]) * ws.g_z_1[g1];
-            ws.jac[at] -= gi * ws.g_z_y[g0];
+            let a = h * ws.classical.mass[k];
+            // (h a_k can underflow: such a column adds nothing, even
+            // against an infinite entry of G.)
+            if a != 0.0 {
+                ws.jac[at] -= (a * ws.g_z_1[g1]) * ws.g_z_y[g0];
+            }
         }
         return band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
             .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }));

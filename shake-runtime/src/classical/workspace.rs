@@ -3,7 +3,7 @@
 //! G's columns, and the terms of SHAKE's Jacobian within its band.
 
 use crate::linalg::Band;
-use crate::system::ConstrainedSystem;
+use crate::system::{ConstrainedSystem, ConstraintKind};
 
 /// What the classical step (parent module) keeps between calls, allocated
 /// once. Buffers that receive a system's output are written only by the
@@ -15,8 +15,8 @@ pub(crate) struct Buffers {
     /// The column group (i mod groups) of each entry of `pattern`.
     pub(crate) group: Vec<usize>,
     /// The diagonal of the constant mass matrix A = H_pp when A is
-    /// diagonal (empty otherwise, or when the classical path does not
-    /// apply).
+    /// diagonal and `products` lists the Jacobian's terms (empty
+    /// otherwise, or when the classical path does not apply).
     pub(crate) mass: Vec<f64>,
     /// The terms a_k G1(i, k) G0(j, k) of SHAKE's Jacobian that fall in its
     /// band (A diagonal), in the order the sum takes them: k, the entry of
@@ -46,12 +46,28 @@ impl Buffers {
             .copied()
             .filter(|&(i, k)| i < m && k < d)
             .collect();
-        let mass = diagonal_mass(sys);
+        let mut mass = diagonal_mass(sys);
         // G's columns (CSC: column k's rows are
         // col_rows[col_start[k]..col_start[k + 1]]).
         let col_start = column_starts(sys, d, m);
         let col_rows = column_rows(sys, d, m);
-        let products = jacobian_products(&mass, &col_start, &col_rows, m, band);
+        // The list only where the classical path can run (g holonomic, H
+        // separable with quadratic T), and only while it stays a few times
+        // G's own size: a column with r rows gives r² terms, so a G with
+        // dense columns would make it quadratic in m (its Jacobian then
+        // comes from the column groups, without the list).
+        let classical =
+            sys.kind() == ConstraintKind::Holonomic && sys.separable() && sys.quadratic_kinetic();
+        let most = 16 * pattern.len().max(4);
+        let products = if classical && !mass.is_empty() {
+            jacobian_products(&mass, &col_start, &col_rows, m, band, most)
+        } else {
+            None
+        };
+        if products.is_none() {
+            mass.clear();
+        }
+        let products = products.unwrap_or_default();
         Buffers {
             group: pattern.iter().map(|&(i, _)| i % groups).collect(),
             pattern,
@@ -113,15 +129,16 @@ fn column_starts<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize
 
 /// `products`: for each k with a_k ≠ 0 and each pair (i, j) of rows of
 /// G's column k within the Jacobian's band, [k, i + k m, j + k m, i + j m]
-/// (k, then i, then j: the order of the sum it replaces). Empty unless A
-/// is diagonal.
+/// (k, then i, then j: the order of the sum it replaces); `None` beyond
+/// `most` terms.
 fn jacobian_products(
     mass: &[f64],
     col_start: &[usize],
     col_rows: &[usize],
     m: usize,
     band: Band,
-) -> Vec<[usize; 4]> {
+    most: usize,
+) -> Option<Vec<[usize; 4]>> {
     let mut products = Vec::new();
     for k in 0..mass.len() {
         if mass[k] == 0.0 {
@@ -131,12 +148,15 @@ fn jacobian_products(
         for &i in rows {
             for &j in rows {
                 if i <= j + band.lower && j <= i + band.upper {
+                    if products.len() == most {
+                        return None;
+                    }
                     products.push([k, i + k * m, j + k * m, i + j * m]);
                 }
             }
         }
     }
-    products
+    Some(products)
 }
 
 /// The rows of each column k < d of G, column after column.
@@ -151,4 +171,38 @@ fn column_rows<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize> 
         }
     }
     rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_products_list_follows_the_band_and_stops_at_its_cap() {
+        // G of 3 constraints on 2 columns: column 0 reads rows 0, 1, 2,
+        // column 1 rows 1, 2 (CSC).
+        let (col_start, col_rows) = (vec![0, 3, 5], vec![0, 1, 2, 1, 2]);
+        let full = Band { lower: 2, upper: 2 };
+        let all = jacobian_products(&[1.0, 2.0], &col_start, &col_rows, 3, full, 100).unwrap();
+        assert_eq!(all.len(), 9 + 4);
+        // k first, then i, then j; entries as flat indices.
+        assert_eq!(all[0], [0, 0, 0, 0]);
+        assert_eq!(all[1], [0, 0, 1, 3]);
+        assert_eq!(all[9], [1, 1 + 3, 1 + 3, 1 + 3]);
+        // A tridiagonal band drops the (0, 2) and (2, 0) terms.
+        let tri = Band { lower: 1, upper: 1 };
+        assert_eq!(
+            jacobian_products(&[1.0, 2.0], &col_start, &col_rows, 3, tri, 100)
+                .unwrap()
+                .len(),
+            7 + 4
+        );
+        // A zero mass adds no terms; past the cap there is no list.
+        let one = jacobian_products(&[0.0, 2.0], &col_start, &col_rows, 3, full, 100).unwrap();
+        assert_eq!(one.len(), 4);
+        assert_eq!(
+            jacobian_products(&[1.0, 2.0], &col_start, &col_rows, 3, full, 12),
+            None
+        );
+    }
 }

@@ -11,8 +11,9 @@ use super::{tridiagonal, Band, Singular};
 /// interleave them with the interchanges ([`band_lu_solve`]). U gets
 /// `band.lower + band.upper` superdiagonals (the fill of pivoting), and its
 /// diagonal is stored as reciprocals (read by the banded solves and by
-/// [`lu_det`](super::lu_det) through the recorded band); entries outside the band must be
-/// zero on entry.
+/// [`lu_det`](super::lu_det) through the recorded band); entries outside
+/// the band must be zero on entry (the (1, 1) kernel reads row k's entry in
+/// column k + 2 and nothing further out).
 pub(crate) fn band_lu_factor(
     a: &mut [f64],
     n: usize,

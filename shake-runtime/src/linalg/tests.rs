@@ -141,12 +141,26 @@ fn the_tridiagonal_kernels_give_the_general_kernels_bits() {
     let band = Band { lower: 1, upper: 1 };
     for n in [1, 2, 3, 16, 41] {
         // `banded` pivots in about half of the columns; the diagonally
-        // dominant variant never does.
-        for dominant in [false, true] {
+        // dominant variant never does; the third has ties (|below| =
+        // |diagonal|: no interchange), exact zeros off the diagonal and
+        // −0.0 in the fill (row k, column k + 2), whose sign the factors
+        // keep.
+        for variant in 0..3 {
+            let dominant = variant == 1;
             let mut a = banded(n, band);
             if dominant {
                 for j in 0..n {
                     a[j + j * n] += 4.0;
+                }
+            }
+            if variant == 2 {
+                for j in 0..n {
+                    if j + 1 < n {
+                        a[j + 1 + j * n] = if j % 3 == 0 { -a[j + j * n] } else { 0.0 };
+                    }
+                    if j + 2 < n {
+                        a[j + (j + 2) * n] = -0.0;
+                    }
                 }
             }
             let (mut lu_w, mut piv_w) = (a.clone(), vec![0; n]);
@@ -156,7 +170,7 @@ fn the_tridiagonal_kernels_give_the_general_kernels_bits() {
             assert_eq!(piv_t, piv_w, "n {n}");
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&lu_t), bits(&lu_w), "n {n}");
-            if !dominant && n >= 16 {
+            if variant == 0 && n >= 16 {
                 assert!(
                     piv_w.iter().enumerate().any(|(k, p)| *p != k),
                     "n {n} pivots"
@@ -186,10 +200,53 @@ fn the_tridiagonal_kernels_give_the_general_kernels_bits() {
             }
         }
     }
-    // A zero pivot is still refused.
-    let mut z = vec![0.0; 9];
-    let mut piv = vec![0; 3];
-    assert_eq!(band_lu_factor(&mut z, 3, band, &mut piv), Err(Singular));
+    // A zero column is refused, and so is a non-finite pivot, in the first
+    // column and in the last; the two kernels agree on each.
+    let cases: [(&[usize], f64); 4] = [
+        (&[0, 1], 0.0),
+        (&[0], f64::NAN),
+        (&[7, 8], 0.0),
+        (&[8], f64::INFINITY),
+    ];
+    for (at, v) in cases {
+        let mut z = vec![1.0, 0.5, 0.0, 0.5, 1.0, 0.5, 0.0, 0.5, 1.0];
+        for &i in at {
+            z[i] = v;
+        }
+        let mut piv = vec![0; 3];
+        let (mut w, mut piv_w) = (z.clone(), vec![0; 3]);
+        let general = band_lu_factor_w(&mut w, 3, 1, 2, &mut piv_w);
+        assert_eq!(general, Err(Singular), "{at:?} {v}");
+        assert_eq!(
+            band_lu_factor(&mut z, 3, band, &mut piv),
+            general,
+            "{at:?} {v}"
+        );
+    }
+}
+
+#[test]
+fn small_banded_kernels_give_the_run_time_size_bits() {
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    for n in 2..=9 {
+        let band = Band::full(n);
+        let a = banded(n, band);
+        let (mut lu, mut piv) = (a.clone(), vec![0; n]);
+        band_lu_factor(&mut lu, n, band, &mut piv).unwrap();
+        let n_rt = std::hint::black_box(n);
+        let (mut lu_r, mut piv_r) = (a.clone(), vec![0; n]);
+        band_lu_factor_w(&mut lu_r, n_rt, n_rt - 1, 2 * n_rt - 2, &mut piv_r).unwrap();
+        assert_eq!((bits(&lu), &piv), (bits(&lu_r), &piv_r), "n {n}");
+        let b0: Vec<f64> = (0..n).map(|i| 0.5 - 0.2 * i as f64).collect();
+        let (mut x, mut x_r) = (b0.clone(), b0.clone());
+        band_lu_solve(&lu, n, band, &piv, &mut x);
+        band_lu_solve_w(&lu_r, n_rt, n_rt - 1, 2 * n_rt - 2, &piv_r, &mut x_r);
+        assert_eq!(bits(&x), bits(&x_r), "solve n {n}");
+        let (mut y, mut y_r) = (b0.clone(), b0.clone());
+        band_lu_solve_transpose(&lu, n, band, &piv, &mut y);
+        band_lu_solve_transpose_w(&lu_r, n_rt, n_rt - 1, 2 * n_rt - 2, &piv_r, &mut y_r);
+        assert_eq!(bits(&y), bits(&y_r), "transposed solve n {n}");
+    }
 }
 
 #[test]

@@ -23,14 +23,17 @@ pub(super) fn factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), S
     if n == 0 {
         return Ok(());
     }
-    // Row k at columns k, k + 1 (column k + 2 is outside the band: zero).
+    // Row k at columns k, k + 1 as the steps before left it (column k + 2
+    // they do not touch).
     let (mut d, mut u1) = (a[0], if n > 1 { a[n] } else { 0.0 });
     for k in 0..n - 1 {
         let kk = k + k * n;
         let wide = k + 2 < n;
-        // Row k + 1 at columns k, k + 1, k + 2, as given.
+        // Row k + 1 at columns k, k + 1, k + 2, as given, and row k's entry
+        // in column k + 2 (outside the band: a zero, but with its sign).
         let below = a[kk + 1];
         let (b1, b2) = (a[kk + 1 + n], if wide { a[kk + 1 + 2 * n] } else { 0.0 });
+        let u2 = if wide { a[kk + 2 * n] } else { 0.0 };
         let swap = below.abs() > d.abs();
         let max = if swap { below.abs() } else { d.abs() };
         piv[k] = if swap { k + 1 } else { k };
@@ -39,9 +42,9 @@ pub(super) fn factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), S
         }
         // The pivot row and the row it eliminates from.
         let (top, mut low) = if swap {
-            ([below, b1, b2], [d, u1, 0.0])
+            ([below, b1, b2], [d, u1, u2])
         } else {
-            ([d, u1, 0.0], [below, b1, b2])
+            ([d, u1, u2], [below, b1, b2])
         };
         let inv = 1.0 / top[0];
         let l = low[0] * inv;

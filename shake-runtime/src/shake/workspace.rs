@@ -171,11 +171,6 @@ impl Workspace {
 /// call were not written (finite, so that `+=` still changes it).
 const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
 
-/// The band of SHAKE's Jacobian predicted from the structure of the system
-/// (module docs): column j reaches the constraints that read a variable of
-/// X_{g_j} or of J H_zz X_{g_j}. The pattern of H_zz is the set of entries
-/// `hessian` writes (the contract of `system`: exactly the structurally
-/// nonzero ones). Small systems get the full band.
 /// The band of N = {{H,g_i},g_j} that the system writes at all: a system
 /// writes only structurally nonzero entries (the contract of `system`), so
 /// an entry still holding a sentinel after one evaluation is zero at every
@@ -204,6 +199,11 @@ fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
     }
 }
 
+/// The band of SHAKE's Jacobian predicted from the structure of the system
+/// (module docs): column j reaches the constraints that read a variable of
+/// X_{g_j} or of J H_zz X_{g_j}. The pattern of H_zz is the set of entries
+/// `hessian` writes (the contract of `system`: exactly the structurally
+/// nonzero ones). Small systems get the full band.
 fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
     let (d, m) = (sys.dof(), sys.constraint_count());
     let n = 2 * d;
