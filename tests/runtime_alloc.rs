@@ -64,6 +64,20 @@ fn steps_do_not_allocate() {
         NoClosedForm(DoublePendulum::default()),
         DoublePendulum::default().state(0.5, 1.0, 0.3, -0.2),
     );
+    // Declared with the macro: the fixed-size classical steps of one
+    // (`classical::fixed`) and of two to eight constraints (`fixed_m`).
+    let declared = shake::models::Pendulum::new(1.0, 9.81);
+    every_base(
+        "declared pendulum",
+        declared,
+        Pendulum::default().state(1.0, 0.5),
+    );
+    let double = shake::models::DoublePendulum::new(1.0, 1.0, 9.81);
+    every_base(
+        "declared double pendulum",
+        double,
+        DoublePendulum::default().state(0.5, 1.0, 0.3, -0.2),
+    );
     every_base("Hopf", Hopf::gravity(), hopf.clone());
     every_base("Hopf, expm", NoClosedForm(Hopf::gravity()), hopf.clone());
     every_base("Hopf, GBS", AsGeneral(Hopf::gravity()), hopf);

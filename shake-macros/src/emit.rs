@@ -284,20 +284,27 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     };
 
     // The classical step on stack arrays of the system's size (the
-    // runtime's `classical::fixed`): it needs d as a constant, which only
-    // the macro knows.
-    let fixed = if der.kind == Kind::Holonomic && separable && quadratic_kinetic && m == 1 {
-        quote! {
+    // runtime's `classical::fixed` for one constraint, `fixed_m` for two
+    // to eight): it needs d and m as constants, which only the macro knows.
+    let classical = der.kind == Kind::Holonomic && separable && quadratic_kinetic;
+    let step = match m {
+        1 => Some(quote!(::shake::runtime::classical::fixed::substep::<Self, #d>(self, cx))),
+        2..=8 => {
+            Some(quote!(::shake::runtime::classical::fixed_m::substep::<Self, #d, #m>(self, cx)))
+        }
+        _ => None,
+    };
+    let fixed = match step {
+        Some(step) if classical => quote! {
             #[inline]
             fn classical_fixed(
                 &self,
                 cx: ::shake::runtime::classical::fixed::Substep<'_>,
             ) -> ::core::option::Option<::core::result::Result<::shake::runtime::StepInfo, ::shake::runtime::StepError>> {
-                ::shake::runtime::classical::fixed::substep::<Self, #d>(self, cx)
+                #step
             }
-        }
-    } else {
-        quote!()
+        },
+        _ => quote!(),
     };
 
     quote! {

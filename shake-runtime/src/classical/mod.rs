@@ -48,6 +48,7 @@
 //! other classical system.
 
 pub mod fixed;
+pub mod fixed_m;
 mod workspace;
 
 pub(crate) use workspace::Buffers;
@@ -55,9 +56,11 @@ pub(crate) use workspace::Buffers;
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
+use crate::guard::Guard;
 use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf, zero_short};
 use crate::newton::NewtonOptions;
 use crate::shake::{ShakeReport, Workspace};
+use crate::step::StepInfo;
 use crate::system::{ConstrainedSystem, ConstraintKind};
 
 /// The kick fractions (a, b) of the base map when the classical path
@@ -375,4 +378,52 @@ pub(crate) fn project<S: ConstrainedSystem>(
         }
     }
     norm_inf(&ws.sigma)
+}
+
+/// The checks of a classical substep's new state (q, p) = z1⁻ (finite, on
+/// M to round-off with g's scale from G0, then the guard's nondegeneracy,
+/// component and fibre-jump checks, one evaluation and factorisation of N
+/// at the new q), and, if `project`, Π: one linear solve with those
+/// factors. Shared by the slice path and the fixed-size ones.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn check_and_project<S: ConstrainedSystem>(
+    sys: &S,
+    q: &mut [f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+    guard: &mut Guard,
+    report: &ShakeReport,
+    project_onto_mh: bool,
+    h: f64,
+    step: u64,
+    t: f64,
+) -> Result<StepInfo, StepError> {
+    let mut info = StepInfo {
+        shake_iterations: report.iterations,
+        lambda: report.lambda,
+        ..StepInfo::default()
+    };
+    Guard::finite(q, p, "state", step, t)?;
+    // g at the new state was the last residual of SHAKE's iteration (the
+    // state is z0 + Δ, rounded once more by the addition); the tolerance's
+    // scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step.
+    crate::validate::gradient_sizes(&ws.classical.pattern, &ws.g_z_y, &mut ws.g_size);
+    guard.after_shake(
+        sys,
+        q,
+        p,
+        ws,
+        report,
+        &mut info,
+        project_onto_mh,
+        h,
+        step,
+        t,
+    )?;
+    if project_onto_mh {
+        // Linear in σ: one solve, no second root to jump to.
+        project(sys, q, p, ws);
+        info.rattle_iterations = 1;
+    }
+    Ok(info)
 }

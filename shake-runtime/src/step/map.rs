@@ -164,38 +164,20 @@ impl<B: BaseMap> StepMap<B> {
         }
         let report = crate::classical::shake_step(sys, kdk, h, q, p, &mut self.ws, &newton, carry)
             .map_err(|e| e.at(step, t))?;
-        let mut info = StepInfo {
-            shake_iterations: report.iterations,
-            lambda: report.lambda,
-            ..StepInfo::default()
-        };
-        Guard::finite(q, p, "state", step, t)?;
-        // g at the new state was the last residual of SHAKE's iteration
-        // (the state is z0 + Δ, rounded once more by the addition); the
-        // tolerance's scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step.
-        crate::validate::gradient_sizes(
-            &self.ws.classical.pattern,
-            &self.ws.g_z_y,
-            &mut self.ws.g_size,
-        );
-        guard.after_shake(
+        let info = crate::classical::check_and_project(
             sys,
             q,
             p,
             &mut self.ws,
+            guard,
             &report,
-            &mut info,
             project,
             h,
             step,
             t,
         )?;
+        // N at this q is factorised (the lazy Π of a stored state uses it).
         self.n_fresh = true;
-        if project {
-            // Linear in σ: one solve, no second root to jump to.
-            crate::classical::project(sys, q, p, &mut self.ws);
-            info.rattle_iterations = 1;
-        }
         Ok(info)
     }
 }

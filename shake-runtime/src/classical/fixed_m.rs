@@ -1,0 +1,322 @@
+//! The classical SHAKE step of a few constraints (2 ≤ m ≤ 8) on stack
+//! arrays of the system's own sizes: what `constrained_system!` calls when
+//! it can see d and m at compile time.
+//!
+//! The map is the slice path's (`classical::shake_step`), computed with the
+//! same operations in the same order (the same kick, residual, Jacobian
+//! from the same list of terms, the same banded LU kernels, the same
+//! stopping rules), so it gives the same steps to the last bit
+//! (`tests/fast_paths.rs`). Only SHAKE's Newton iteration moves to the
+//! stack: λ, r, q1, Δ and the m×m Jacobian are arrays whose lengths the
+//! compiler knows, so the loops over them unroll and the generated
+//! derivatives inline with their sizes. The checks of the new state and Π
+//! are the slice path's (`classical::check_and_project`).
+//!
+//! A wrapper around a system must not forward
+//! [`ConstrainedSystem::classical_fixed`] (see `classical::fixed`).
+
+use super::fixed::Substep;
+use super::Buffers;
+use crate::compensated::kahan_add;
+use crate::error::{SolveError, Stage, StepError};
+use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, norm_inf, Band};
+use crate::newton::NewtonOptions;
+use crate::shake::{ShakeReport, Workspace};
+use crate::step::StepInfo;
+use crate::system::ConstrainedSystem;
+
+/// One classical substep for d = `D` and m = `M` (module docs): SHAKE on
+/// the stack, then the slice path's checks and Π. `None` when the state's
+/// length is not `D` or the system has not `M` constraints (the caller
+/// takes the slice path).
+#[inline]
+pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    cx: Substep<'_>,
+) -> Option<Result<StepInfo, StepError>> {
+    if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != M || !(2..=8).contains(&M) {
+        return None;
+    }
+    let Substep {
+        q,
+        p,
+        h,
+        kdk,
+        project,
+        step,
+        t,
+        newton,
+        guard,
+        ws,
+        carry,
+    } = cx;
+    let report = match shake::<S, D, M>(sys, kdk, h, q, p, ws, &newton, carry) {
+        Ok(r) => r,
+        Err(e) => return Some(Err(e.at(step, t))),
+    };
+    Some(super::check_and_project(
+        sys, q, p, ws, guard, &report, project, h, step, t,
+    ))
+}
+
+/// The stack state of SHAKE's iteration: u (the momentum increment before
+/// the last kick), Δq, q1 and r = g(q1).
+struct Iterate<const D: usize, const M: usize> {
+    u: [f64; D],
+    dq: [f64; D],
+    q1: [f64; D],
+    r: [f64; M],
+}
+
+/// q1(λ) and r(λ) as `classical::residual` computes them (λ = 0 when
+/// `lambda` is `None`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    h: f64,
+    q0: &[f64; D],
+    p0: &[f64; D],
+    kick: &[f64; D],
+    g0: &[f64],
+    pattern: &[(usize, usize)],
+    lambda: Option<&[f64; M]>,
+) -> Iterate<D, M> {
+    let mut u = *kick;
+    if let Some(l) = lambda {
+        let mut y = *q0;
+        if !sys.fibre_flow(l, &mut y, &mut u).applied() {
+            for &(i, k) in pattern {
+                u[k] -= g0[i + k * M] * l[i];
+            }
+        }
+    }
+    let mut v = [0.0; D];
+    for k in 0..D {
+        v[k] = p0[k] + u[k];
+    }
+    let mut w = [0.0; D];
+    sys.grad_p(q0, &v, &mut w);
+    let (mut dq, mut q1) = ([0.0; D], [0.0; D]);
+    for k in 0..D {
+        dq[k] = h * w[k];
+        q1[k] = q0[k] + dq[k];
+    }
+    let mut r = [0.0; M];
+    sys.constraints(&q1, p0, &mut r);
+    Iterate { u, dq, q1, r }
+}
+
+/// SHAKE's Jacobian −h G(q1) A G0ᵀ at `q1`, factorised in `jac`/`piv`, as
+/// `classical::jacobian` forms it (the list of terms when A is diagonal,
+/// else the column groups through `grad_p`).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    h: f64,
+    (q0, p0, q1): (&[f64; D], &[f64; D], &[f64; D]),
+    (cl, g0, band, groups): (&Buffers, &[f64], Band, usize),
+    g1: &mut [f64],
+    jac: &mut [[f64; M]; M],
+    piv: &mut [usize; M],
+    iterations: usize,
+) -> Result<(), StepError> {
+    sys.constraint_jacobian(q1, p0, g1);
+    let jac = jac.as_flattened_mut();
+    let fill = band.lower + band.upper;
+    for j in 0..M {
+        let lo = j.saturating_sub(fill);
+        let hi = (j + band.lower).min(M - 1);
+        jac[lo + j * M..=hi + j * M].fill(0.0);
+    }
+    if !cl.mass.is_empty() {
+        for &[k, i1, i0, at] in &cl.products {
+            let a = h * cl.mass[k];
+            if a != 0.0 {
+                jac[at] -= (a * g1[i1]) * g0[i0];
+            }
+        }
+    } else {
+        for c in 0..groups {
+            let mut v = [0.0; D];
+            for (&(i, k), &grp) in cl.pattern.iter().zip(&cl.group) {
+                if grp == c {
+                    v[k] -= g0[i + k * M];
+                }
+            }
+            let mut w = [0.0; D];
+            sys.grad_p(q0, &v, &mut w);
+            let mut jv = [0.0; M];
+            for &(i, k) in &cl.pattern {
+                jv[i] += g1[i + k * M] * w[k];
+            }
+            for i in 0..M {
+                let lo = i.saturating_sub(band.lower);
+                let j = lo + (c + groups - lo % groups) % groups;
+                if j > i + band.upper || j >= M {
+                    continue;
+                }
+                jac[i + j * M] = h * jv[i];
+            }
+        }
+    }
+    band_lu_factor(jac, M, band, piv)
+        .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
+}
+
+/// `classical::shake_step` on the stack: (q, p) becomes z1⁻ in place,
+/// λ, its first iterate and r = g(z1⁻) are left in `ws.lambda`,
+/// `ws.lambda_first` and `ws.g`, G0 in `ws.g_z_y`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    (a, b): (f64, f64),
+    h: f64,
+    q: &mut [f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+    carry: Option<&mut [f64]>,
+) -> Result<ShakeReport, StepError> {
+    let q0: [f64; D] = (&*q).try_into().expect("checked by substep");
+    let p0: [f64; D] = (&*p).try_into().expect("checked by substep");
+    // The first kick and G0 (kept in the workspace: the checks after the
+    // step measure g's scale with it).
+    let mut hq = [0.0; D];
+    sys.grad_q(&q0, &p0, &mut hq);
+    let mut kick = [0.0; D];
+    for k in 0..D {
+        kick[k] = -(a * h) * hq[k];
+    }
+    sys.constraint_jacobian(&q0, &p0, &mut ws.g_z_y);
+    let mut floor = [0.0; M];
+    for &(i, k) in &ws.classical.pattern {
+        floor[i] += f64::EPSILON * (ws.g_z_y[i + k * M] * q0[k]).abs();
+    }
+    let pattern = &ws.classical.pattern;
+    let mut it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &ws.g_z_y, pattern, None);
+    let mut lambda = [0.0; M];
+    let mut lambda_first = [0.0; M];
+    let mut jac = [[0.0; M]; M];
+    let mut piv = [0usize; M];
+    let band: Band = ws.jac_band;
+    let mut iterations = 0;
+    let mut fresh = true;
+    let mut prev = f64::INFINITY;
+    let mut refreshed = false;
+    let mut need_jacobian = true;
+    let mut lambda_noise = 0.0;
+    let mut r_first = 0.0;
+    let not_finite =
+        |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
+    let outcome = loop {
+        let r = norm_inf(&it.r);
+        if !(r.is_finite() && all_finite(&it.r) && all_finite(&it.dq)) {
+            break Err(not_finite(iterations));
+        }
+        if r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f) {
+            break Ok(());
+        }
+        if iterations >= opts.max_iterations {
+            break Err(StepError::from_solve(
+                Stage::Shake,
+                SolveError::NotConverged {
+                    iterations,
+                    residual: r,
+                },
+            ));
+        }
+        if iterations == 0 {
+            r_first = r;
+        }
+        if need_jacobian {
+            let at = (&ws.classical, &ws.g_z_y[..], band, ws.groups);
+            let z = (&q0, &p0, &it.q1);
+            if let Err(e) = jacobian(sys, h, z, at, &mut ws.g_z_1, &mut jac, &mut piv, 0) {
+                break Err(e);
+            }
+            need_jacobian = false;
+        }
+        let mut delta = it.r;
+        band_lu_solve(jac.as_flattened(), M, band, &piv, &mut delta);
+        for (l, dl) in lambda.iter_mut().zip(&delta) {
+            *l -= dl;
+        }
+        let (step, size) = (norm_inf(&delta), norm_inf(&lambda));
+        if iterations == 0 {
+            lambda_first = lambda;
+        }
+        iterations += 1;
+        let pattern = &ws.classical.pattern;
+        it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &ws.g_z_y, pattern, Some(&lambda));
+        if !(step.is_finite() && size.is_finite()) {
+            break Err(not_finite(iterations));
+        }
+        if iterations == 1 {
+            lambda_noise = step / r_first * norm_inf(&floor);
+        }
+        let tol = (opts.step_tolerance * size).max(lambda_noise);
+        let theta = step / prev;
+        prev = step;
+        if step <= tol {
+            break Ok(());
+        }
+        if theta > 0.5 && step <= opts.stagnation_threshold * size.max(1.0) && (fresh || refreshed)
+        {
+            break Ok(());
+        }
+        fresh = false;
+        if theta > 0.25 {
+            let at = (&ws.classical, &ws.g_z_y[..], band, ws.groups);
+            let z = (&q0, &p0, &it.q1);
+            if let Err(e) = jacobian(sys, h, z, at, &mut ws.g_z_1, &mut jac, &mut piv, iterations) {
+                break Err(e);
+            }
+            fresh = true;
+            refreshed |= step <= opts.stagnation_threshold * size.max(1.0);
+        }
+    };
+    outcome?;
+    // p1 − p0 = u − b h ∇V(q1).
+    let mut dp = it.u;
+    if b != 0.0 {
+        let mut hq1 = [0.0; D];
+        sys.grad_q(&it.q1, &p0, &mut hq1);
+        for k in 0..D {
+            dp[k] = it.u[k] - (b * h) * hq1[k];
+        }
+    }
+    match carry {
+        Some(c) => {
+            let (cq, cp) = c.split_at_mut(D);
+            for k in 0..D {
+                kahan_add(&mut q[k], &mut cq[k], it.dq[k]);
+                kahan_add(&mut p[k], &mut cp[k], dp[k]);
+            }
+        }
+        None => {
+            for k in 0..D {
+                q[k] += it.dq[k];
+                p[k] += dp[k];
+            }
+        }
+    }
+    ws.g.copy_from_slice(&it.r);
+    ws.lambda.copy_from_slice(&lambda);
+    ws.lambda_first.copy_from_slice(&lambda_first);
+    let mut report = ShakeReport {
+        iterations,
+        lambda: norm_inf(&lambda),
+        ..ShakeReport::default()
+    };
+    if iterations > 0 {
+        report.lambda_predicted = norm_inf(&lambda_first);
+        report.lambda_correction = lambda
+            .iter()
+            .zip(&lambda_first)
+            .fold(0.0f64, |e, (x, y)| e.max((x - y).abs()));
+    }
+    Ok(report)
+}
