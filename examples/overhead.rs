@@ -76,6 +76,7 @@ macro_rules! chain {
 chain!(Chain4, 4);
 chain!(Chain16, 16);
 chain!(Chain64, 64);
+chain!(Chain256, 256);
 
 const H: f64 = 0.01;
 const REPS: usize = 7;
@@ -321,6 +322,11 @@ fn main() {
     }
     if want("chain_64") {
         print("chain_64", &chain::<64, _>(Chain64::new(1.0, 1.0), 1_000));
+    }
+    // Not in the default table (the four sizes): 256 links, on
+    // request, to see how the ratio grows with the chain.
+    if only.as_deref() == Some("chain_256") {
+        print("chain_256", &chain::<256, _>(Chain256::new(1.0, 1.0), 250));
     }
     if want("memory") {
         memory();
