@@ -46,6 +46,28 @@
 //!   `io_arrow`: as an Arrow IPC (Feather v2) file and back.
 //! - with the `progress` feature, `progress`: an indicatif bar on a run's
 //!   per-step hook.
+//!
+//! # How a step is made
+//!
+//! Three layers, each a module that reads alone:
+//!
+//! - [`step`]: the step maps. A substep map (SHAKE S_{γh}, then Π when the
+//!   substep is projected, so R_{γh}) owns its base map and its workspaces;
+//!   a composed step (Section 4) holds one for the substeps γ_k h and a
+//!   second for its reverse check. SHAKE's Newton iteration has a general
+//!   path (`shake`: through the base map and the fibre flow) and, for
+//!   holonomic g with separable H and a kick–drift–kick base map, the
+//!   classical one (`classical`: positions only, an analytic Jacobian,
+//!   on stack arrays for the systems `constrained_system!` declares with one
+//!   to eight constraints).
+//! - [`guard`]: every check a (sub)step's result must pass, configured by
+//!   [`Options`]: finite, on M to round-off, N = {{H,g_i},g_j} well
+//!   conditioned and on the same component, λ and σ near their linear
+//!   predictions.
+//! - [`run`]: the driver: stop rules, stride, storage, observers,
+//!   diagnostics, the trajectory so far on error.
+//!
+//! [`Integrator`] is the facade that holds a system, a step map and a guard.
 #![warn(missing_docs)]
 // Numerical kernels index several arrays with one loop variable, as the
 // formulas do; iterator chains would hide them.
