@@ -439,4 +439,20 @@ fn the_fixed_size_step_is_the_slice_step() {
         assert_eq!((ea.step(), ea.time()), (eb.step(), eb.time()));
         assert_eq!(a.trajectory.len(), b.trajectory.len());
     }
+    // The same for two constraints (`fixed_m`), with the multipliers the
+    // failed step leaves.
+    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    for h in [2.0, 40.0] {
+        let go = |fixed: bool| {
+            let mut i = Integrator::new(double, StormerVerlet, h).fixed_size(fixed);
+            let out = i.run(double_start(), Stop::Steps(20)).execute();
+            (out, i.last_multipliers().to_vec())
+        };
+        let ((a, la), (b, lb)) = (go(true), go(false));
+        let (ea, eb) = (a.error.expect("fails"), b.error.expect("fails"));
+        println!("double pendulum, h {h}: {ea}");
+        assert_eq!(format!("{ea:?}"), format!("{eb:?}"));
+        assert_eq!(a.trajectory.len(), b.trajectory.len());
+        assert_eq!(la, lb, "λ left by the failed step");
+    }
 }

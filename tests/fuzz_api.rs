@@ -74,6 +74,9 @@ enum Sys {
     Spherical(f64, f64),
     /// Holonomic, m = 2, d = 4 (gravity).
     Double(f64),
+    /// The same declared with `constrained_system!` (gravity): its
+    /// classical steps run on stack arrays (`classical::fixed_m`).
+    DeclaredDouble(f64),
     /// Non-separable H, holonomic (ε, gravity).
     NonSeparable(f64, f64),
     /// Momentum-dependent g = |z|² − r² (r², γ₁, γ₂), closed-form fibres.
@@ -165,6 +168,7 @@ fn sys_strategy() -> impl Strategy<Value = Sys> {
         (g(), l()).prop_map(|(a, b)| Sys::Pendulum(a, b)),
         (g(), l()).prop_map(|(a, b)| Sys::Spherical(a, b)),
         g().prop_map(Sys::Double),
+        g().prop_map(Sys::DeclaredDouble),
         (hostile(0.0..1.0), g()).prop_map(|(a, b)| Sys::NonSeparable(a, b)),
         (l(), g(), g()).prop_map(|(r, a, b)| Sys::Hopf(r, a, b)),
         (l(), g(), g()).prop_map(|(r, a, b)| Sys::HopfGeneral(r, a, b)),
@@ -296,7 +300,7 @@ fn on_mh(sys: &Sys, a: f64, b: f64, w: f64) -> State {
         Sys::Spherical(gravity, length) => {
             SphericalPendulum { gravity, length }.state(a, b, w, 0.3)
         }
-        Sys::Double(gravity) => DoublePendulum {
+        Sys::Double(gravity) | Sys::DeclaredDouble(gravity) => DoublePendulum {
             gravity,
             ..DoublePendulum::default()
         }
@@ -319,7 +323,7 @@ fn dof(sys: &Sys) -> usize {
     match sys {
         Sys::Pendulum(..) | Sys::NonSeparable(..) | Sys::Hopf(..) | Sys::HopfGeneral(..) => 2,
         Sys::Spherical(..) => 3,
-        Sys::Double(..) => 4,
+        Sys::Double(..) | Sys::DeclaredDouble(..) => 4,
     }
 }
 
@@ -654,6 +658,14 @@ fn run_case(case: &Case) -> Verdict {
             case,
             z0,
         ),
+        Sys::DeclaredDouble(gravity) => {
+            // Unit masses and rods, as `DoublePendulum::default()`.
+            judge_sys(
+                shake::models::DoublePendulum::new(1.0, 1.0, gravity),
+                case,
+                z0,
+            )
+        }
         Sys::NonSeparable(eps, gravity) => {
             judge_sys(NonSeparablePendulum { eps, gravity }, case, z0)
         }
@@ -873,6 +885,7 @@ fn extreme_parameters_end_in_a_verdict() {
             Sys::Spherical(x, 1.0),
             Sys::Spherical(1.0, x),
             Sys::Double(x),
+            Sys::DeclaredDouble(x),
             Sys::NonSeparable(x, 1.0),
             Sys::NonSeparable(0.5, x),
             Sys::Hopf(x, 0.0, -1.0),

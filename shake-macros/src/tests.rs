@@ -168,6 +168,43 @@ fn expansion_time() {
     }
 }
 
+/// The fixed-size classical step is emitted where the runtime can use it:
+/// `classical::fixed` for one constraint, `classical::fixed_m` with d and m
+/// as constants for two to eight, nothing beyond eight or when the
+/// classical path does not apply (g reads p).
+#[test]
+fn the_fixed_size_step_is_emitted_for_one_to_eight_constraints() {
+    let chain = |n: usize| {
+        format!(
+            "pub struct Chain {{ parameters {{ length }} const N = {n}; dof q[2*N], p[2*N];
+             hamiltonian = sum i in 0..N {{ (p[2*i]^2 + p[2*i+1]^2) / 2 + q[2*i+1] }};
+             constraints {{ link[k in 0..N]: if k == 0 {{ q[0]^2 + q[1]^2 - length^2 }}
+                 else {{ (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 }} }} }}"
+        )
+    };
+    let expand = |src: &str| {
+        let out = crate::expand(src.parse().expect("tokens")).to_string();
+        assert!(!out.contains("compile_error"), "{out}");
+        out.replace(' ', "")
+    };
+    assert!(expand(&chain(1)).contains("classical::fixed::substep::<Self,2usize>"));
+    assert!(expand(&chain(2)).contains("classical::fixed_m::substep::<Self,4usize,2usize>"));
+    assert!(expand(&chain(8)).contains("classical::fixed_m::substep::<Self,16usize,8usize>"));
+    let nine = expand(&chain(9));
+    assert!(
+        !nine.contains("fnclassical_fixed"),
+        "m = 9 takes the slice path"
+    );
+    let hopf = expand(
+        "pub struct Hopf { dof q[2], p[2]; hamiltonian = (p[0]^2 + p[1]^2) / 2;
+         constraints { sphere: q[0]^2 + q[1]^2 + p[0]^2 + p[1]^2 - 1 } }",
+    );
+    assert!(
+        !hopf.contains("fnclassical_fixed"),
+        "g reads p: no classical step"
+    );
+}
+
 /// Prints the expansion of the pendulum (for reading the generated code).
 /// Run with `cargo test -p shake-macros -- --ignored --nocapture print_pendulum`.
 #[test]

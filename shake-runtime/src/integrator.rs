@@ -198,9 +198,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 
     /// On the classical fast path, use the system's fixed-size step when it
     /// has one (default true): `constrained_system!` gives one to systems
-    /// of one constraint, which then step on stack arrays of their own
-    /// size with N a number. `false` keeps the classical path on the
-    /// workspace's vectors; both give the same steps to round-off
+    /// of one to eight constraints, which then step on stack arrays of
+    /// their own size (with N a number for one constraint). `false` keeps
+    /// the classical path on the workspace's vectors; both give the same
+    /// steps to round-off, and to the bit for two to eight constraints
     /// (`tests/fast_paths.rs`).
     ///
     /// ```

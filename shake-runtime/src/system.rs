@@ -199,8 +199,10 @@ pub trait ConstrainedSystem: Hamiltonian {
 
     /// One classical substep (holonomic g, separable H with quadratic T,
     /// a kick–drift–kick base map) on stack arrays of this system's size,
-    /// `crate::classical::fixed::substep::<Self, D>`: `constrained_system!`
-    /// implements it when m = 1, since it knows d at compile time. `None`
+    /// `crate::classical::fixed::substep::<Self, D>` (m = 1) or
+    /// `crate::classical::fixed_m::substep::<Self, D, M>` (m = 2 to 8):
+    /// `constrained_system!` implements it for those m, since it knows d
+    /// and m at compile time. `None`
     /// (the default) leaves the step to the runtime's slice path, which
     /// computes the same map. A wrapper that changes any of the wrapped
     /// system's functions must not forward this (the step would call the

@@ -10,7 +10,9 @@
 //! stack: λ, r, q1, Δ and the m×m Jacobian are arrays whose lengths the
 //! compiler knows, so the loops over them unroll and the generated
 //! derivatives inline with their sizes. The checks of the new state and Π
-//! are the slice path's (`classical::check_and_project`).
+//! are the slice path's (`classical::check_and_project`). `tests/
+//! fast_paths.rs` compares the two paths; `shake-macros`' tests show the
+//! macro emits this step for m = 2 to 8.
 //!
 //! A wrapper around a system must not forward
 //! [`ConstrainedSystem::classical_fixed`] (see `classical::fixed`).
@@ -165,9 +167,12 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
         .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
-/// `classical::shake_step` on the stack: (q, p) becomes z1⁻ in place,
-/// λ, its first iterate and r = g(z1⁻) are left in `ws.lambda`,
-/// `ws.lambda_first` and `ws.g`, G0 in `ws.g_z_y`.
+/// `classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
+/// the last λ, its first iterate and the last residual r are left in
+/// `ws.lambda`, `ws.lambda_first` and `ws.g` (on failure too, as the slice
+/// path leaves them), G0 in `ws.g_z_y` and G at the last Jacobian's q1 in
+/// `ws.g_z_1`. The slice path's other buffers are not written: nothing
+/// after the step reads them before writing them.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
@@ -278,6 +283,13 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             refreshed |= step <= opts.stagnation_threshold * size.max(1.0);
         }
     };
+    // As the slice path leaves them, whether SHAKE converged or not: the
+    // last residual and λ (and λ's first iterate once there was one).
+    ws.g.copy_from_slice(&it.r);
+    ws.lambda.copy_from_slice(&lambda);
+    if iterations > 0 {
+        ws.lambda_first.copy_from_slice(&lambda_first);
+    }
     outcome?;
     // p1 − p0 = u − b h ∇V(q1).
     let mut dp = it.u;
@@ -303,9 +315,6 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             }
         }
     }
-    ws.g.copy_from_slice(&it.r);
-    ws.lambda.copy_from_slice(&lambda);
-    ws.lambda_first.copy_from_slice(&lambda_first);
     let mut report = ShakeReport {
         iterations,
         lambda: norm_inf(&lambda),

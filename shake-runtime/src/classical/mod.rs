@@ -42,10 +42,12 @@
 //!
 //! # Fixed sizes
 //!
-//! For one constraint, a system that knows its d at compile time (every
-//! `constrained_system!`) takes the same step on stack arrays, with N and
-//! the Jacobian as numbers ([`fixed`]); the functions here serve every
-//! other classical system.
+//! A system that knows its d and m at compile time (every
+//! `constrained_system!`) takes the same step on stack arrays: for one
+//! constraint with N and the Jacobian as numbers and its own checks
+//! ([`fixed`]), for two to eight with SHAKE's iteration on the stack and
+//! the checks and Π of [`check_and_project`] ([`fixed_m`]). The functions
+//! here serve every other classical system.
 
 pub mod fixed;
 pub mod fixed_m;
@@ -384,7 +386,9 @@ pub(crate) fn project<S: ConstrainedSystem>(
 /// M to round-off with g's scale from G0, then the guard's nondegeneracy,
 /// component and fibre-jump checks, one evaluation and factorisation of N
 /// at the new q), and, if `project`, Π: one linear solve with those
-/// factors. Shared by the slice path and the fixed-size ones.
+/// factors. Shared by the slice path and the fixed-size step of 2 to 8
+/// constraints (`fixed_m`; the one-constraint step `fixed` checks with
+/// numbers instead).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check_and_project<S: ConstrainedSystem>(
     sys: &S,
