@@ -21,7 +21,7 @@ use super::fixed::Substep;
 use super::Buffers;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, norm_inf, Band};
+use crate::linalg::{all_finite, full_band_lu_factor, full_band_lu_solve, norm_inf, Band};
 use crate::newton::NewtonOptions;
 use crate::shake::{ShakeReport, Workspace};
 use crate::step::StepInfo;
@@ -163,7 +163,10 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
             }
         }
     }
-    band_lu_factor(jac, M, band, piv)
+    // (The band of M ≤ 8 rows is full: `shake::Workspace` predicts bands
+    // from 12 rows on.)
+    debug_assert_eq!(band, Band::full(M));
+    full_band_lu_factor::<M>(jac, piv)
         .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
@@ -245,7 +248,7 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             need_jacobian = false;
         }
         let mut delta = it.r;
-        band_lu_solve(jac.as_flattened(), M, band, &piv, &mut delta);
+        full_band_lu_solve::<M>(jac.as_flattened(), &piv, &mut delta);
         for (l, dl) in lambda.iter_mut().zip(&delta) {
             *l -= dl;
         }

@@ -67,6 +67,22 @@ mod lu;
 mod vector;
 
 pub(crate) use band::{band_lu_factor, band_lu_solve};
+
+/// [`band_lu_factor`] for a full band of `N` rows known at compile time
+/// (the fixed-size steps): the kernel `small_n!` dispatches to, inlined.
+#[inline(always)]
+pub(crate) fn full_band_lu_factor<const N: usize>(
+    a: &mut [f64],
+    piv: &mut [usize],
+) -> Result<(), Singular> {
+    band::band_lu_factor_w(a, N, N - 1, 2 * N - 2, piv)
+}
+
+/// [`band_lu_solve`] for the factors of [`full_band_lu_factor`].
+#[inline(always)]
+pub(crate) fn full_band_lu_solve<const N: usize>(lu: &[f64], piv: &[usize], b: &mut [f64]) {
+    band::band_lu_solve_w(lu, N, N - 1, 2 * N - 2, piv, b)
+}
 #[cfg(test)]
 pub(crate) use estimate::inverse_norm1_estimate;
 pub(crate) use estimate::inverse_norm1_estimate_from;
