@@ -46,7 +46,7 @@
 //! `constrained_system!`) takes the same step on stack arrays: for one
 //! constraint with N and the Jacobian as numbers and its own checks
 //! ([`fixed`]), for two to eight with SHAKE's iteration on the stack and
-//! the checks and Π of [`check_and_project`] ([`fixed_m`]). The functions
+//! the checks and Π of `check_and_project` ([`fixed_m`]). The functions
 //! here serve every other classical system.
 
 pub mod fixed;
