@@ -31,7 +31,7 @@ pub(crate) struct StepMap<B: BaseMap> {
     pub(crate) classical: Option<(f64, f64)>,
     pub(crate) fast_paths: bool,
     /// Whether the fast classical path may use the system's fixed-size
-    /// step (`classical::fixed`) when it has one.
+    /// step (`classical::fixed`, `classical::fixed_m`) when it has one.
     pub(crate) fixed_size: bool,
     /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
     /// (set by the classical step's check and by `Integrator::begin`).
