@@ -36,7 +36,15 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     cx: Substep<'_>,
 ) -> Option<Result<StepInfo, StepError>> {
-    if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != M || !(2..=8).contains(&M) {
+    // (SHAKE's Jacobian is factorised as a full M × M band: the workspace
+    // predicts narrower bands only from 12 rows on, so this holds; should
+    // it not, the slice path takes the step.)
+    if cx.q.len() != D
+        || cx.p.len() != D
+        || sys.constraint_count() != M
+        || !(2..=8).contains(&M)
+        || cx.ws.jac_band != Band::full(M)
+    {
         return None;
     }
     let Substep {
@@ -163,9 +171,7 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
             }
         }
     }
-    // (The band of M ≤ 8 rows is full: `shake::Workspace` predicts bands
-    // from 12 rows on.)
-    debug_assert_eq!(band, Band::full(M));
+    // (The band is full: checked by `substep`.)
     full_band_lu_factor::<M>(jac, piv)
         .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }

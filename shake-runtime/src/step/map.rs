@@ -71,7 +71,7 @@ impl<B: BaseMap> StepMap<B> {
     ) -> Result<StepInfo, StepError> {
         self.n_fresh = false;
         if let (Some(kdk), true) = (self.classical, self.fast_paths) {
-            return self.classical(sys, guard, q, p, h, project, carry, step, t, kdk);
+            return self.classical_step(sys, guard, q, p, h, project, carry, step, t, kdk);
         }
         let newton = *guard.newton();
         let report = shake_step(
@@ -129,7 +129,7 @@ impl<B: BaseMap> StepMap<B> {
     /// factorisation of N at the new q for the checks and (if `project`)
     /// for Π, which is one linear solve.
     #[allow(clippy::too_many_arguments)]
-    fn classical<S: ConstrainedSystem>(
+    fn classical_step<S: ConstrainedSystem>(
         &mut self,
         sys: &S,
         guard: &mut Guard,
