@@ -205,9 +205,14 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         kick[k] = -(a * h) * hq[k];
     }
     sys.constraint_jacobian(&q0, &p0, &mut ws.g_z_y);
+    // g's round-off level near q0 and ‖∂g_i/∂z‖₁ at q0, in one pass over
+    // G0 (as the slice path, `classical::shake_step`).
     let mut floor = [0.0; M];
+    ws.g_size.fill(0.0);
     for &(i, k) in &ws.classical.pattern {
-        floor[i] += f64::EPSILON * (ws.g_z_y[i + k * M] * q0[k]).abs();
+        let g = ws.g_z_y[i + k * M];
+        floor[i] += f64::EPSILON * (g * q0[k]).abs();
+        ws.g_size[i] += g.abs();
     }
     let pattern = &ws.classical.pattern;
     let mut it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &ws.g_z_y, pattern, None);

@@ -201,9 +201,14 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     // last bit changes it by, ε Σ_k |∂g_i/∂q_k| |q_k|. (Not more: the
     // momenta come out of λ divided by h, so a residual left 4 times above
     // this shows in p as 4 times the round-off of a converged step.)
+    // In the same pass over G0, ‖∂g_i/∂z‖₁: the scale of the guard's test
+    // that the new state is on M (`check_and_project`).
     ws.classical.floor.fill(0.0);
+    ws.g_size.fill(0.0);
     for &(i, k) in &ws.classical.pattern {
-        ws.classical.floor[i] += f64::EPSILON * (ws.g_z_y[i + k * m] * q[k]).abs();
+        let g = ws.g_z_y[i + k * m];
+        ws.classical.floor[i] += f64::EPSILON * (g * q[k]).abs();
+        ws.g_size[i] += g.abs();
     }
     residual(sys, h, ws, true);
     let mut report = ShakeReport::default();
@@ -410,8 +415,8 @@ pub(crate) fn check_and_project<S: ConstrainedSystem>(
     Guard::finite(q, p, "state", step, t)?;
     // g at the new state was the last residual of SHAKE's iteration (the
     // state is z0 + Δ, rounded once more by the addition); the tolerance's
-    // scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step.
-    crate::validate::gradient_sizes(&ws.classical.pattern, &ws.g_z_y, &mut ws.g_size);
+    // scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step, which the SHAKE
+    // step left in `ws.g_size`.
     guard.after_shake(
         sys,
         q,
