@@ -26,8 +26,8 @@
 
 use crate::error::{Stage, StepError};
 use crate::linalg::{
-    band_lu_factor, copy_short, inverse_norm1_estimate_from, lu_det, lu_factor, lu_solve, norm_inf,
-    zero_short, Band, Singular,
+    band_lu_factor, inverse_norm1_estimate_from, lu_det, lu_factor, lu_solve, norm_inf, zero_short,
+    Band, Singular,
 };
 use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::shake::Workspace;
@@ -99,6 +99,7 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
             ));
         }
         sys.nondegeneracy_matrix(&ws.z1[..d], &ws.z1[d..], &mut ws.n.mat);
+        read_n(ws, false);
         factor_n(ws).map_err(|_| {
             StepError::from_solve(
                 Stage::Rattle,
@@ -277,8 +278,8 @@ impl NondegeneracyCheck {
     }
 }
 
-/// Copies N (in `ws.n.mat`) into `ws.jac` and factorises it there, within
-/// its structural band `ws.n.band` when that is narrower than the matrix:
+/// Factorises N, which [`read_n`] copied into `ws.jac`, there, within its
+/// structural band `ws.n.band` when that is narrower than the matrix:
 /// O(m b²) for a chain instead of O(m²) passes over a dense m×m buffer.
 /// The band is recorded in the spare slots of `ws.piv`, so `lu_solve` and
 /// the condition estimate use the banded factors.
@@ -286,20 +287,7 @@ fn factor_n(ws: &mut Workspace) -> Result<(), Singular> {
     let m = ws.m;
     let band = ws.n.band;
     if band == Band::full(m) {
-        ws.jac.copy_from_slice(&ws.n.mat);
         return lu_factor(&mut ws.jac, m, &mut ws.piv);
-    }
-    // The band and the fill of the banded LU (rows j − l − u ..= j + l of
-    // column j); nothing outside it is ever read.
-    let fill = band.lower + band.upper;
-    for j in 0..m {
-        let (lo, hi) = (j.saturating_sub(fill), (j + band.lower).min(m - 1));
-        let (top, col) = (j.saturating_sub(band.upper), j * m);
-        zero_short(&mut ws.jac[lo + col..top + col]);
-        copy_short(
-            &mut ws.jac[top + col..=hi + col],
-            &ws.n.mat[top + col..=hi + col],
-        );
     }
     band_lu_factor(&mut ws.jac, m, band, &mut ws.piv)?;
     ws.piv[m] = band.lower;
@@ -307,34 +295,41 @@ fn factor_n(ws: &mut Workspace) -> Result<(), Singular> {
     Ok(())
 }
 
-/// ‖A‖₁ of an m×m matrix whose nonzero entries lie in `band`.
-fn band_norm1(a: &[f64], m: usize, band: Band) -> f64 {
-    (0..m)
-        .map(|j| {
-            let (top, hi) = (j.saturating_sub(band.upper), (j + band.lower).min(m - 1));
-            a[top + j * m..=hi + j * m]
-                .iter()
-                .map(|v| v.abs())
-                .sum::<f64>()
-        })
-        .fold(0.0, f64::max)
-}
-
-/// ‖N − N_prev‖₁ within N's band (`ws.n.mat` against `ws.n.prev`), then
-/// N_prev ← N: how much N changed since the last checked state.
-pub(crate) fn n_change(ws: &mut Workspace) -> f64 {
+/// One pass over N (in `ws.n.mat`) within its structural band: returns
+/// ‖N‖₁ and, when `track`, ‖N − N_prev‖₁ (how much N changed since the
+/// last checked state) with N_prev ← N (`ws.n.prev`; 0 and untouched
+/// otherwise); and copies N into `ws.jac` for [`factor_n`], with the fill
+/// of the banded LU (rows j − l − u ..= j − u − 1 of column j) zeroed.
+/// Nothing outside the band and its fill is ever read. (One pass, not
+/// three: on a chain of 64 links these were a few per cent of a step.)
+pub(crate) fn read_n(ws: &mut Workspace, track: bool) -> (f64, f64) {
     let (m, band) = (ws.m, ws.n.band);
-    let mut worst = 0.0f64;
+    let fill = band.lower + band.upper;
+    let (mut norm, mut change) = (0.0f64, 0.0f64);
     for j in 0..m {
         let (top, hi) = (j.saturating_sub(band.upper), (j + band.lower).min(m - 1));
-        let mut column = 0.0;
-        for k in top + j * m..=hi + j * m {
-            column += (ws.n.mat[k] - ws.n.prev[k]).abs();
-            ws.n.prev[k] = ws.n.mat[k];
+        let col = j * m;
+        zero_short(&mut ws.jac[j.saturating_sub(fill) + col..top + col]);
+        let (mut sum, mut diff) = (0.0, 0.0);
+        if track {
+            for k in top + col..=hi + col {
+                let v = ws.n.mat[k];
+                sum += v.abs();
+                diff += (v - ws.n.prev[k]).abs();
+                ws.n.prev[k] = v;
+                ws.jac[k] = v;
+            }
+        } else {
+            for k in top + col..=hi + col {
+                let v = ws.n.mat[k];
+                sum += v.abs();
+                ws.jac[k] = v;
+            }
         }
-        worst = worst.max(column);
+        norm = norm.max(sum);
+        change = change.max(diff);
     }
-    worst
+    (norm, change)
 }
 
 /// Evaluates and factorises N(q, p).
@@ -345,15 +340,20 @@ pub(crate) fn check_nondegeneracy<S: ConstrainedSystem>(
     ws: &mut Workspace,
 ) -> NondegeneracyCheck {
     sys.nondegeneracy_matrix(q, p, &mut ws.n.mat);
-    factor_and_check(ws, None)
+    let (norm, _) = read_n(ws, false);
+    factor_and_check(ws, norm, None)
 }
 
-/// Factorises N (already in `ws.n.mat`) and checks it: det N, ‖N‖₁ and
-/// ‖N⁻¹‖₁, estimated by Hager's method for m ≥ 2 unless `bound` gives an
-/// upper bound of it already (see `Guard::judge_shake`).
-pub(crate) fn factor_and_check(ws: &mut Workspace, bound: Option<f64>) -> NondegeneracyCheck {
+/// Factorises N (copied into `ws.jac` by [`read_n`], which also gave
+/// `norm` = ‖N‖₁) and checks it: det N, ‖N‖₁ and ‖N⁻¹‖₁, estimated by
+/// Hager's method for m ≥ 2 unless `bound` gives an upper bound of it
+/// already (see `Guard::judge_shake`).
+pub(crate) fn factor_and_check(
+    ws: &mut Workspace,
+    norm: f64,
+    bound: Option<f64>,
+) -> NondegeneracyCheck {
     let m = ws.m;
-    let norm = band_norm1(&ws.n.mat, m, ws.n.band);
     if !norm.is_finite() {
         return NondegeneracyCheck {
             det: f64::NAN,
@@ -378,15 +378,22 @@ pub(crate) fn factor_and_check(ws: &mut Workspace, bound: Option<f64>) -> Nondeg
             norm,
             inverse_norm: match bound {
                 Some(b) => b,
-                None => inverse_norm1_estimate_from(
-                    &ws.jac,
-                    m,
-                    &ws.piv,
-                    &mut ws.n.s1,
-                    &mut ws.n.s2,
-                    &mut ws.n.cond_column,
-                ),
+                None => estimate_inverse(ws),
             },
         },
     }
+}
+
+/// Hager's estimate of ‖N⁻¹‖₁ from the factors [`factor_and_check`] left
+/// in `ws.jac`/`ws.piv` (m ≥ 2), started from the column the last
+/// estimate ended on.
+pub(crate) fn estimate_inverse(ws: &mut Workspace) -> f64 {
+    inverse_norm1_estimate_from(
+        &ws.jac,
+        ws.m,
+        &ws.piv,
+        &mut ws.n.s1,
+        &mut ws.n.s2,
+        &mut ws.n.cond_column,
+    )
 }

@@ -344,7 +344,7 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
             inverse_norm: 1.0 / n.abs(),
         }
     };
-    // As `check_nondegeneracy` and `n_change` leave the workspace: N
+    // As `read_n` and `factor_and_check` leave the workspace: N
     // factorised in `jac` (for the lazy Π of `classical::project`), N in
     // `n.mat` and `n.prev`.
     let change = (n - ws.n.prev[0]).abs();

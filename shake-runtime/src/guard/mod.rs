@@ -27,7 +27,8 @@ use crate::error::{SolveError, Stage, StepError};
 use crate::linalg::{all_finite, norm_inf};
 use crate::newton::NewtonOptions;
 use crate::rattle::{
-    check_nondegeneracy, factor_and_check, n_change, NondegeneracyCheck, ProjectionReport,
+    check_nondegeneracy, estimate_inverse, factor_and_check, read_n, NondegeneracyCheck,
+    ProjectionReport,
 };
 use crate::shake::{ShakeReport, Workspace};
 use crate::step::StepInfo;
@@ -105,8 +106,9 @@ impl Guard {
         {
             return Err(e.at(step, t));
         }
-        let nd = check_nondegeneracy(sys, q, p, ws);
-        n_change(ws);
+        sys.nondegeneracy_matrix(q, p, &mut ws.n.mat);
+        let (norm, _) = read_n(ws, true);
+        let nd = factor_and_check(ws, norm, None);
         self.n_prev_valid = true;
         self.inverse_prev = nd.inverse_norm;
         self.estimated = nd.inverse_norm;
@@ -214,14 +216,16 @@ impl Guard {
             t,
         )?;
         sys.nondegeneracy_matrix(q, p, &mut ws.n.mat);
-        let change = n_change(ws);
+        let (norm, change) = read_n(ws, true);
         let bound = self.inverse_bound(change);
-        let mut nd = factor_and_check(ws, bound);
+        let mut nd = factor_and_check(ws, norm, bound);
         if bound.is_none() || !(nd.condition(self.reference_norm) <= self.options.max_condition) {
             // No bound, or one not sharp enough to pass the limit (the
-            // state is refused only on an estimate): estimate.
-            if bound.is_some() {
-                nd = factor_and_check(ws, None);
+            // state is refused only on an estimate): estimate, from the
+            // factors just made (none when N is singular or not finite:
+            // ‖N⁻¹‖₁ is ∞ then, bound or not).
+            if bound.is_some() && ws.m >= 2 && nd.inverse_norm.is_finite() {
+                nd.inverse_norm = estimate_inverse(ws);
             }
             self.estimated = nd.inverse_norm;
         }

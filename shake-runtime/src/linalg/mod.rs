@@ -88,7 +88,7 @@ pub(crate) use estimate::inverse_norm1_estimate;
 pub(crate) use estimate::inverse_norm1_estimate_from;
 pub(crate) use expm::{expm, matmul};
 pub(crate) use lu::{lu_det, lu_factor, lu_solve, lu_solve_transpose};
-pub(crate) use vector::{all_finite, copy_short, norm_inf, zero_short};
+pub(crate) use vector::{all_finite, norm_inf, zero_short};
 #[cfg(test)]
 use {
     band::{band_lu_factor_w, band_lu_solve_transpose, band_lu_solve_transpose_w, band_lu_solve_w},

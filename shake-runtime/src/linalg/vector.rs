@@ -38,19 +38,6 @@ pub(crate) fn zero_short(v: &mut [f64]) {
     }
 }
 
-/// `dst.copy_from_slice(src)` for a band's column, as [`zero_short`].
-#[inline(always)]
-pub(crate) fn copy_short(dst: &mut [f64], src: &[f64]) {
-    if dst.len() > 8 || dst.len() != src.len() {
-        return dst.copy_from_slice(src);
-    }
-    for i in 0..8 {
-        if i < dst.len() {
-            dst[i] = src[i];
-        }
-    }
-}
-
 /// Whether every entry is finite. (Without short-circuiting: a flag that
 /// every entry `and`s into vectorises, and a run's vectors are finite.)
 #[inline]
