@@ -218,6 +218,15 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     let constraints = writes(&coder, "g", m, &g_entries, m);
     let jac: Vec<(usize, NodeId)> = der.g_z.iter().map(|((i, k), n)| (i + k * m, *n)).collect();
     let jacobian = writes(&coder, "g_z", m * n2, &jac, m);
+    // The same entries packed in the pattern's order (the same roots in
+    // the same order: the same block of lets, the same bits).
+    let packed: Vec<(usize, NodeId)> = der
+        .g_z
+        .iter()
+        .enumerate()
+        .map(|(e, (_, n))| (e, *n))
+        .collect();
+    let jacobian_values = writes(&coder, "values", packed.len(), &packed, m);
     let g_hess = writes(&coder, "out", n2 * n2, &symmetric(&der.g_hess, n2), m);
     let hidden_entries: Vec<(usize, NodeId)> = der
         .hidden
@@ -366,6 +375,11 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
             fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) { #constraints }
             #[inline]
             fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]) { #jacobian }
+            #[inline]
+            fn constraint_jacobian_values(&self, q: &[f64], p: &[f64], values: &mut [f64]) -> bool {
+                #jacobian_values
+                true
+            }
             fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) { #g_hess }
             #[inline]
             fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]) { #hidden }

@@ -170,6 +170,23 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// [`Self::jacobian_pattern`] are written.
     fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]);
 
+    /// The entries of g_z at the positions of
+    /// [`Self::jacobian_pattern`], in its order, packed into `values` (one
+    /// per entry of the pattern): the numbers
+    /// [`Self::constraint_jacobian`] writes, to the bit. Returns `false`
+    /// (the default), leaving `values` untouched, when the system does not
+    /// provide them; the runtime then reads them out of
+    /// `constraint_jacobian`. `constrained_system!` provides them. They
+    /// matter for long chains: the nonzeros of the dense m × 2d g_z lie a
+    /// column (8m bytes) apart, so writing and reading them touches a
+    /// cache line each, in buffers that outgrow the caches from a few
+    /// hundred constraints on. A wrapper that changes `constraint_jacobian`
+    /// must not forward this.
+    fn constraint_jacobian_values(&self, q: &[f64], p: &[f64], values: &mut [f64]) -> bool {
+        let _ = (q, p, values);
+        false
+    }
+
     /// Σ_i λ_i ∇²g_i (2d × 2d, column-major): the derivative of the fibre
     /// vector field Σ λ_i X_{g_i}, needed for tangent maps and for the
     /// numerical fibre flow. Only structurally nonzero entries are written.

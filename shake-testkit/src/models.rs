@@ -760,8 +760,15 @@ pub struct NoClosedForm<S>(pub S);
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct AsGeneral<S>(pub S);
 
+/// Delegates everything to `S`, its closed-form fibre flow included, but
+/// the packed values of g_z
+/// ([`ConstrainedSystem::constraint_jacobian_values`]) and the fixed-size
+/// step, so the runtime reads G out of the dense g_z on its slice path.
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct DenseJacobian<S>(pub S);
+
 macro_rules! delegate {
-    ($wrapper:ident, $kind:expr) => {
+    ($wrapper:ident, $kind:expr $(, { $($more:tt)* })?) => {
         impl<S: ConstrainedSystem> Hamiltonian for $wrapper<S> {
             fn dof(&self) -> usize {
                 self.0.dof()
@@ -817,9 +824,15 @@ macro_rules! delegate {
             fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]) {
                 self.0.nondegeneracy_matrix(q, p, n)
             }
+            $($($more)*)?
         }
     };
 }
 
 delegate!(NoClosedForm, None);
 delegate!(AsGeneral, Some(ConstraintKind::General));
+delegate!(DenseJacobian, None, {
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
+        self.0.fibre_flow(lambda, q, p)
+    }
+});

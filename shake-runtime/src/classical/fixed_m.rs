@@ -18,7 +18,7 @@
 //! [`ConstrainedSystem::classical_fixed`] (see `classical::fixed`).
 
 use super::fixed::Substep;
-use super::Buffers;
+use super::{packed_jacobian, Buffers};
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
 use crate::linalg::{all_finite, full_band_lu_factor, full_band_lu_solve, norm_inf, Band};
@@ -96,8 +96,8 @@ fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
     if let Some(l) = lambda {
         let mut y = *q0;
         if !sys.fibre_flow(l, &mut y, &mut u).applied() {
-            for &(i, k) in pattern {
-                u[k] -= g0[i + k * M] * l[i];
+            for (&(i, k), g) in pattern.iter().zip(g0) {
+                u[k] -= g * l[i];
             }
         }
     }
@@ -126,13 +126,13 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     h: f64,
     (q0, p0, q1): (&[f64; D], &[f64; D], &[f64; D]),
-    (cl, g0, band, groups): (&Buffers, &[f64], Band, usize),
-    g1: &mut [f64],
+    (cl, dense, band, groups): (&mut Buffers, &mut [f64], Band, usize),
     jac: &mut [[f64; M]; M],
     piv: &mut [usize; M],
     iterations: usize,
 ) -> Result<(), StepError> {
-    sys.constraint_jacobian(q1, p0, g1);
+    packed_jacobian(sys, q1, p0, (&cl.pattern, cl.whole), dense, &mut cl.g1);
+    let (g0, g1) = (&cl.g0, &cl.g1);
     let jac = jac.as_flattened_mut();
     let fill = band.lower + band.upper;
     for j in 0..M {
@@ -150,16 +150,16 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
     } else {
         for c in 0..groups {
             let mut v = [0.0; D];
-            for (&(i, k), &grp) in cl.pattern.iter().zip(&cl.group) {
+            for ((&(_, k), &grp), g) in cl.pattern.iter().zip(&cl.group).zip(g0) {
                 if grp == c {
-                    v[k] -= g0[i + k * M];
+                    v[k] -= g;
                 }
             }
             let mut w = [0.0; D];
             sys.grad_p(q0, &v, &mut w);
             let mut jv = [0.0; M];
-            for &(i, k) in &cl.pattern {
-                jv[i] += g1[i + k * M] * w[k];
+            for (&(i, k), g) in cl.pattern.iter().zip(g1) {
+                jv[i] += g * w[k];
             }
             for i in 0..M {
                 let lo = i.saturating_sub(band.lower);
@@ -179,8 +179,8 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
 /// `classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
 /// the last λ, its first iterate and the last residual r are left in
 /// `ws.lambda`, `ws.lambda_first` and `ws.g` (on failure too, as the slice
-/// path leaves them), G0 in `ws.g_z_y` and G at the last Jacobian's q1 in
-/// `ws.g_z_1`. The slice path's other buffers are not written: nothing
+/// path leaves them), G0 and G at the last Jacobian's q1 packed in
+/// `ws.classical.g0`/`g1`. The slice path's other buffers are not written: nothing
 /// after the step reads them before writing them.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -204,18 +204,24 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
     for k in 0..D {
         kick[k] = -(a * h) * hq[k];
     }
-    sys.constraint_jacobian(&q0, &p0, &mut ws.g_z_y);
+    let cl = &mut ws.classical;
+    packed_jacobian(
+        sys,
+        &q0,
+        &p0,
+        (&cl.pattern, cl.whole),
+        &mut ws.g_z_y,
+        &mut cl.g0,
+    );
     // g's round-off level near q0 and ‖∂g_i/∂z‖₁ at q0, in one pass over
     // G0 (as the slice path, `classical::shake_step`).
     let mut floor = [0.0; M];
     ws.g_size.fill(0.0);
-    for &(i, k) in &ws.classical.pattern {
-        let g = ws.g_z_y[i + k * M];
+    for (&(i, k), &g) in cl.pattern.iter().zip(&cl.g0) {
         floor[i] += f64::EPSILON * (g * q0[k]).abs();
         ws.g_size[i] += g.abs();
     }
-    let pattern = &ws.classical.pattern;
-    let mut it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &ws.g_z_y, pattern, None);
+    let mut it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &cl.g0, &cl.pattern, None);
     let mut lambda = [0.0; M];
     let mut lambda_first = [0.0; M];
     let mut jac = [[0.0; M]; M];
@@ -251,9 +257,9 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             r_first = r;
         }
         if need_jacobian {
-            let at = (&ws.classical, &ws.g_z_y[..], band, ws.groups);
+            let at = (&mut ws.classical, &mut ws.g_z_1[..], band, ws.groups);
             let z = (&q0, &p0, &it.q1);
-            if let Err(e) = jacobian(sys, h, z, at, &mut ws.g_z_1, &mut jac, &mut piv, 0) {
+            if let Err(e) = jacobian(sys, h, z, at, &mut jac, &mut piv, 0) {
                 break Err(e);
             }
             need_jacobian = false;
@@ -268,8 +274,8 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             lambda_first = lambda;
         }
         iterations += 1;
-        let pattern = &ws.classical.pattern;
-        it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &ws.g_z_y, pattern, Some(&lambda));
+        let cl = &ws.classical;
+        it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &cl.g0, &cl.pattern, Some(&lambda));
         if !(step.is_finite() && size.is_finite()) {
             break Err(not_finite(iterations));
         }
@@ -288,9 +294,9 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         }
         fresh = false;
         if theta > 0.25 {
-            let at = (&ws.classical, &ws.g_z_y[..], band, ws.groups);
+            let at = (&mut ws.classical, &mut ws.g_z_1[..], band, ws.groups);
             let z = (&q0, &p0, &it.q1);
-            if let Err(e) = jacobian(sys, h, z, at, &mut ws.g_z_1, &mut jac, &mut piv, iterations) {
+            if let Err(e) = jacobian(sys, h, z, at, &mut jac, &mut piv, iterations) {
                 break Err(e);
             }
             fresh = true;

@@ -53,7 +53,7 @@ pub mod fixed;
 pub mod fixed_m;
 mod workspace;
 
-pub(crate) use workspace::Buffers;
+pub(crate) use workspace::{packed_jacobian, Buffers};
 
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
@@ -85,7 +85,6 @@ pub(crate) fn classical<S: ConstrainedSystem, B: BaseMap>(sys: &S, base: &B) -> 
 /// `ws.z1[..d]`, r in `ws.g`.
 fn residual<S: ConstrainedSystem>(sys: &S, h: f64, ws: &mut Workspace, first: bool) {
     let d = ws.d;
-    let m = ws.m;
     ws.classical.u.copy_from_slice(&ws.classical.kick);
     if !first {
         // u ← u − G0ᵀλ: the fibre flow's kick, in the system's closed form
@@ -95,8 +94,9 @@ fn residual<S: ConstrainedSystem>(sys: &S, h: f64, ws: &mut Workspace, first: bo
             .fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.classical.u)
             .applied()
         {
-            for &(i, k) in &ws.classical.pattern {
-                ws.classical.u[k] -= ws.g_z_y[i + k * m] * ws.lambda[i];
+            let cl = &mut ws.classical;
+            for (&(i, k), g) in cl.pattern.iter().zip(&cl.g0) {
+                cl.u[k] -= g * ws.lambda[i];
             }
         }
     }
@@ -123,7 +123,9 @@ fn jacobian<S: ConstrainedSystem>(
     let (d, m) = (ws.d, ws.m);
     let band = ws.jac_band;
     let groups = ws.groups;
-    sys.constraint_jacobian(&ws.z1[..d], &ws.z0[d..], &mut ws.g_z_1);
+    let cl = &mut ws.classical;
+    let at = (&cl.pattern[..], cl.whole);
+    packed_jacobian(sys, &ws.z1[..d], &ws.z0[d..], at, &mut ws.g_z_1, &mut cl.g1);
     let fill = band.lower + band.upper;
     for j in 0..m {
         let lo = j.saturating_sub(fill);
@@ -136,12 +138,13 @@ fn jacobian<S: ConstrainedSystem>(
         // and no column groups (a chain: 4 products per variable).
         // (The terms in the band are listed once per system, in the
         // order of this sum: `Buffers::products`.)
-        for &[k, g1, g0, at] in &ws.classical.products {
-            let a = h * ws.classical.mass[k];
+        let cl = &ws.classical;
+        for &[k, e1, e0, at] in &cl.products {
+            let a = h * cl.mass[k];
             // (h a_k can underflow: such a column adds nothing, even
             // against an infinite entry of G.)
             if a != 0.0 {
-                ws.jac[at] -= (a * ws.g_z_1[g1]) * ws.g_z_y[g0];
+                ws.jac[at] -= (a * cl.g1[e1]) * cl.g0[e0];
             }
         }
         return band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
@@ -149,16 +152,17 @@ fn jacobian<S: ConstrainedSystem>(
     }
     for c in 0..groups {
         // v = −G0ᵀ s_c, s_c the indicator of the columns j ≡ c; w = h A v.
-        ws.classical.v.fill(0.0);
-        for (&(i, k), &grp) in ws.classical.pattern.iter().zip(&ws.classical.group) {
+        let cl = &mut ws.classical;
+        cl.v.fill(0.0);
+        for ((&(_, k), &grp), g) in cl.pattern.iter().zip(&cl.group).zip(&cl.g0) {
             if grp == c {
-                ws.classical.v[k] -= ws.g_z_y[i + k * m];
+                cl.v[k] -= g;
             }
         }
-        sys.grad_p(&ws.z0[..d], &ws.classical.v, &mut ws.classical.w);
+        sys.grad_p(&ws.z0[..d], &cl.v, &mut cl.w);
         ws.jv.fill(0.0);
-        for &(i, k) in &ws.classical.pattern {
-            ws.jv[i] += ws.g_z_1[i + k * m] * ws.classical.w[k];
+        for (&(i, k), g) in cl.pattern.iter().zip(&cl.g1) {
+            ws.jv[i] += g * cl.w[k];
         }
         for i in 0..m {
             let lo = i.saturating_sub(band.lower);
@@ -196,18 +200,25 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     for k in 0..d {
         ws.classical.kick[k] = -(a * h) * ws.classical.hq[k];
     }
-    sys.constraint_jacobian(q, p, &mut ws.g_z_y);
+    let cl = &mut ws.classical;
+    packed_jacobian(
+        sys,
+        q,
+        p,
+        (&cl.pattern, cl.whole),
+        &mut ws.g_z_y,
+        &mut cl.g0,
+    );
     // The round-off level of each g_i near q0: what rounding q to its
     // last bit changes it by, ε Σ_k |∂g_i/∂q_k| |q_k|. (Not more: the
     // momenta come out of λ divided by h, so a residual left 4 times above
     // this shows in p as 4 times the round-off of a converged step.)
     // In the same pass over G0, ‖∂g_i/∂z‖₁: the scale of the guard's test
     // that the new state is on M (`check_and_project`).
-    ws.classical.floor.fill(0.0);
+    cl.floor.fill(0.0);
     ws.g_size.fill(0.0);
-    for &(i, k) in &ws.classical.pattern {
-        let g = ws.g_z_y[i + k * m];
-        ws.classical.floor[i] += f64::EPSILON * (g * q[k]).abs();
+    for (&(i, k), &g) in cl.pattern.iter().zip(&cl.g0) {
+        cl.floor[i] += f64::EPSILON * (g * q[k]).abs();
         ws.g_size[i] += g.abs();
     }
     residual(sys, h, ws, true);
@@ -379,9 +390,17 @@ pub(crate) fn project<S: ConstrainedSystem>(
     // The kick, through the system's closed form when it has one.
     ws.classical.v[..q.len()].copy_from_slice(q);
     if !sys.fibre_flow(&ws.sigma, &mut ws.classical.v, p).applied() {
-        sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-        for &(i, k) in &ws.classical.pattern {
-            p[k] -= ws.g_z_1[i + k * m] * ws.sigma[i];
+        let cl = &mut ws.classical;
+        packed_jacobian(
+            sys,
+            q,
+            p,
+            (&cl.pattern, cl.whole),
+            &mut ws.g_z_1,
+            &mut cl.g1,
+        );
+        for (&(i, k), g) in cl.pattern.iter().zip(&cl.g1) {
+            p[k] -= g * ws.sigma[i];
         }
     }
     norm_inf(&ws.sigma)

@@ -20,8 +20,17 @@ pub(crate) struct Buffers {
     pub(crate) mass: Vec<f64>,
     /// The terms a_k G1(i, k) G0(j, k) of SHAKE's Jacobian that fall in its
     /// band (A diagonal), in the order the sum takes them: k, the entry of
-    /// G1 (i + k m), of G0 (j + k m) and of the Jacobian (i + j m).
+    /// `pattern` holding G1(i, k), the one holding G0(j, k), and the entry
+    /// of the Jacobian (i + j m).
     pub(crate) products: Vec<[usize; 4]>,
+    /// G0 = G(q0) and G1 = G at the last Jacobian's q1, packed: entry e of
+    /// each is ∂g_i/∂q_k for (i, k) = `pattern[e]` (`packed_jacobian`).
+    pub(crate) g0: Vec<f64>,
+    pub(crate) g1: Vec<f64>,
+    /// Whether `pattern` is the system's whole pattern, so that the system's
+    /// own packed values ([`ConstrainedSystem::constraint_jacobian_values`])
+    /// are entries of `pattern` in its order.
+    pub(crate) whole: bool,
     /// −a h ∇V(q0), the first kick.
     pub(crate) kick: Vec<f64>,
     /// The momentum increment before the last kick.
@@ -50,7 +59,7 @@ impl Buffers {
         // G's columns (CSC: column k's rows are
         // col_rows[col_start[k]..col_start[k + 1]]).
         let col_start = column_starts(sys, d, m);
-        let col_rows = column_rows(sys, d, m);
+        let (col_rows, col_entries) = column_rows(sys, d, m);
         // The list only where the classical path can run (g holonomic, H
         // separable with quadratic T), and only while it stays a few times
         // G's own size: a column with r rows gives r² terms, so a G with
@@ -60,7 +69,7 @@ impl Buffers {
             sys.kind() == ConstraintKind::Holonomic && sys.separable() && sys.quadratic_kinetic();
         let most = 16 * pattern.len().max(4);
         let products = if classical && !mass.is_empty() {
-            jacobian_products(&mass, &col_start, &col_rows, m, band, most)
+            jacobian_products(&mass, &col_start, (&col_rows, &col_entries), m, band, most)
         } else {
             None
         };
@@ -70,6 +79,9 @@ impl Buffers {
         let products = products.unwrap_or_default();
         Buffers {
             group: pattern.iter().map(|&(i, _)| i % groups).collect(),
+            g0: vec![0.0; pattern.len()],
+            g1: vec![0.0; pattern.len()],
+            whole: pattern.len() == sys.jacobian_pattern().len(),
             pattern,
             mass,
             products,
@@ -128,13 +140,13 @@ fn column_starts<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize
 }
 
 /// `products`: for each k with a_k ≠ 0 and each pair (i, j) of rows of
-/// G's column k within the Jacobian's band, [k, i + k m, j + k m, i + j m]
-/// (k, then i, then j: the order of the sum it replaces); `None` beyond
-/// `most` terms.
+/// G's column k within the Jacobian's band, [k, e(i, k), e(j, k), i + j m]
+/// with e the entry of the classical pattern (k, then i, then j: the order
+/// of the sum it replaces); `None` beyond `most` terms.
 fn jacobian_products(
     mass: &[f64],
     col_start: &[usize],
-    col_rows: &[usize],
+    (col_rows, col_entries): (&[usize], &[usize]),
     m: usize,
     band: Band,
     most: usize,
@@ -144,14 +156,15 @@ fn jacobian_products(
         if mass[k] == 0.0 {
             continue;
         }
-        let rows = &col_rows[col_start[k]..col_start[k + 1]];
-        for &i in rows {
-            for &j in rows {
+        let at = col_start[k]..col_start[k + 1];
+        let (rows, entries) = (&col_rows[at.clone()], &col_entries[at]);
+        for (&i, &ei) in rows.iter().zip(entries) {
+            for (&j, &ej) in rows.iter().zip(entries) {
                 if i <= j + band.lower && j <= i + band.upper {
                     if products.len() == most {
                         return None;
                     }
-                    products.push([k, i + k * m, j + k * m, i + j * m]);
+                    products.push([k, ei, ej, i + j * m]);
                 }
             }
         }
@@ -159,18 +172,47 @@ fn jacobian_products(
     Some(products)
 }
 
-/// The rows of each column k < d of G, column after column.
-fn column_rows<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> Vec<usize> {
+/// The rows of each column k < d of G, column after column, and where
+/// each sits in the classical pattern (the entries (i, k) of the system's
+/// pattern with i < m, k < d, in its order).
+fn column_rows<S: ConstrainedSystem>(sys: &S, d: usize, m: usize) -> (Vec<usize>, Vec<usize>) {
     let start = column_starts(sys, d, m);
     let mut next = start.clone();
     let mut rows = vec![0usize; start[d]];
+    let mut entries = vec![0usize; start[d]];
+    let mut e = 0;
     for &(i, k) in sys.jacobian_pattern() {
         if i < m && k < d {
             rows[next[k]] = i;
+            entries[next[k]] = e;
             next[k] += 1;
+            e += 1;
         }
     }
-    rows
+    (rows, entries)
+}
+
+/// G(q) packed over `cl.pattern` into `out` (`cl.g0` or `cl.g1`): the
+/// system's own packed values when it has them and the classical pattern
+/// is its whole pattern, else read out of its dense g_z (written into
+/// `dense`). The same numbers either way.
+#[inline(always)]
+pub(crate) fn packed_jacobian<S: ConstrainedSystem>(
+    sys: &S,
+    q: &[f64],
+    p: &[f64],
+    (pattern, whole): (&[(usize, usize)], bool),
+    dense: &mut [f64],
+    out: &mut [f64],
+) {
+    if whole && sys.constraint_jacobian_values(q, p, out) {
+        return;
+    }
+    let m = sys.constraint_count();
+    sys.constraint_jacobian(q, p, dense);
+    for (o, &(i, k)) in out.iter_mut().zip(pattern) {
+        *o = dense[i + k * m];
+    }
 }
 
 #[cfg(test)]
@@ -181,27 +223,34 @@ mod tests {
     fn the_products_list_follows_the_band_and_stops_at_its_cap() {
         // G of 3 constraints on 2 columns: column 0 reads rows 0, 1, 2,
         // column 1 rows 1, 2 (CSC).
+        // The pattern, by rows: (0,0) (1,0) (1,1) (2,0) (2,1), so column 0
+        // holds entries 0, 1, 3 and column 1 entries 2, 4.
         let (col_start, col_rows) = (vec![0, 3, 5], vec![0, 1, 2, 1, 2]);
+        let col_entries = [0, 1, 3, 2, 4];
+        let cols = (&col_rows[..], &col_entries[..]);
         let full = Band { lower: 2, upper: 2 };
-        let all = jacobian_products(&[1.0, 2.0], &col_start, &col_rows, 3, full, 100).unwrap();
+        let all = jacobian_products(&[1.0, 2.0], &col_start, cols, 3, full, 100).unwrap();
         assert_eq!(all.len(), 9 + 4);
-        // k first, then i, then j; entries as flat indices.
+        // k first, then i, then j; G's entries as entries of the pattern,
+        // the Jacobian's as flat indices.
         assert_eq!(all[0], [0, 0, 0, 0]);
         assert_eq!(all[1], [0, 0, 1, 3]);
-        assert_eq!(all[9], [1, 1 + 3, 1 + 3, 1 + 3]);
+        assert_eq!(all[2], [0, 0, 3, 6]);
+        assert_eq!(all[9], [1, 2, 2, 1 + 3]);
+        assert_eq!(all[12], [1, 4, 4, 2 + 2 * 3]);
         // A tridiagonal band drops the (0, 2) and (2, 0) terms.
         let tri = Band { lower: 1, upper: 1 };
         assert_eq!(
-            jacobian_products(&[1.0, 2.0], &col_start, &col_rows, 3, tri, 100)
+            jacobian_products(&[1.0, 2.0], &col_start, cols, 3, tri, 100)
                 .unwrap()
                 .len(),
             7 + 4
         );
         // A zero mass adds no terms; past the cap there is no list.
-        let one = jacobian_products(&[0.0, 2.0], &col_start, &col_rows, 3, full, 100).unwrap();
+        let one = jacobian_products(&[0.0, 2.0], &col_start, cols, 3, full, 100).unwrap();
         assert_eq!(one.len(), 4);
         assert_eq!(
-            jacobian_products(&[1.0, 2.0], &col_start, &col_rows, 3, full, 12),
+            jacobian_products(&[1.0, 2.0], &col_start, cols, 3, full, 12),
             None
         );
     }
