@@ -218,6 +218,15 @@ impl ConstrainedSystem for DeclaredSystem {
             .eval_into(&self.program.jacobian, q, p, &[], g_z);
     }
 
+    fn constraint_jacobian_values(&self, q: &[f64], p: &[f64], values: &mut [f64]) -> bool {
+        if values.len() != self.program.jacobian_pattern.len() {
+            return false;
+        }
+        self.program
+            .eval_into(&self.program.jacobian_values, q, p, &[], values);
+        true
+    }
+
     fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) {
         let t = &self.program.constraint_hessian;
         self.program.eval_into(t, q, p, lambda, out);

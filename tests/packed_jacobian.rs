@@ -5,11 +5,14 @@
 //! dense buffers are 2 MB each). Checked here:
 //!
 //! - the packed values are the dense entries, to the bit, for holonomic and
-//!   momentum-dependent constraints, at random points;
+//!   momentum-dependent constraints, at random points, for the macro's code
+//!   and for a run-time declaration (`shake::declared`, which provides
+//!   them too);
 //! - a run that reads G out of the dense g_z (`DenseJacobian`, a wrapper
 //!   without the packed values) is the same run, to the bit, on the slice
 //!   path (16 links) and against the fixed-size step (4 links).
 
+use shake::declared::DeclaredSystem;
 use shake::{
     constrained_system, ConstrainedSystem, Integrator, Options, State, Stop, StormerVerlet,
 };
@@ -108,11 +111,51 @@ fn the_packed_values_are_the_dense_entries() {
     assert_eq!(counts[0], 100 * (4 * 4 - 2));
     assert_eq!(counts[1], 100 * (4 * 16 - 2));
     assert!(counts[2] > 0 && counts[3] == 200 && counts[4] == 600);
+    // A run-time declaration of the 16-link chain, and of Mixed.
+    assert_eq!(packed_is_dense(&declared_chain16()), counts[1]);
+    assert_eq!(packed_is_dense(&declared_mixed()), counts[2]);
+    // A slice of the wrong length: refused, not a panic.
+    let mut short = [f64::NAN; 3];
+    let chain = Chain4::new(1.0, 9.81);
+    assert!(!chain.constraint_jacobian_values(&[0.0; 8], &[0.0; 8], &mut short));
+    assert!(!declared_chain16().constraint_jacobian_values(&[0.0; 32], &[0.0; 32], &mut short));
+    assert!(short.iter().all(|x| x.is_nan()), "left untouched");
     // A hand-written system provides none: the runtime reads g_z.
     let hand = shake_testkit::models::SphericalPendulum::default();
     let mut out = [f64::NAN; 3];
     assert!(!hand.constraint_jacobian_values(&[0.0, 0.0, -1.0], &[0.0; 3], &mut out));
     assert!(out.iter().all(|x| x.is_nan()), "left untouched");
+}
+
+/// The 16-link chain, declared at run time.
+fn declared_chain16() -> DeclaredSystem {
+    let src = "
+    struct Chain16 {
+        parameters { length, gravity }
+        const N = 16;
+        dof q[2*N], p[2*N];
+        hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
+        constraints {
+            link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
+                else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
+        }
+    }";
+    DeclaredSystem::new(src, &[("length", 1.0), ("gravity", 9.81)]).unwrap()
+}
+
+/// `Mixed`, declared at run time.
+fn declared_mixed() -> DeclaredSystem {
+    let src = "
+    struct Mixed {
+        parameters { c }
+        dof q[3], p[3];
+        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2) / 2 + q[2];
+        constraints {
+            sphere: (q[0] - c)^2 + q[1]^2 + p[0]^2 + p[1]^2 - 1,
+            stretch: q[2] * p[2] - c,
+        }
+    }";
+    DeclaredSystem::new(src, &[("c", 0.3)]).unwrap()
 }
 
 /// A chain of n links at angles 0.3 + 0.7 sin(1.3 k) from the vertical,
@@ -179,4 +222,6 @@ fn reading_g_from_the_dense_g_z_gives_the_same_run() {
     assert_eq!(same_runs(Chain16::new(1.0, 9.81), 16), 2 * 401);
     // 4 links: the fixed-size step (packed) against the slice path (dense).
     assert_eq!(same_runs(Chain4::new(1.0, 9.81), 4), 2 * 401);
+    // Declared at run time: the tape's packed values against its g_z.
+    assert_eq!(same_runs(declared_chain16(), 16), 2 * 401);
 }

@@ -227,6 +227,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
         .map(|(e, (_, n))| (e, *n))
         .collect();
     let jacobian_values = writes(&coder, "values", packed.len(), &packed, m);
+    let nnz = packed.len();
     let g_hess = writes(&coder, "out", n2 * n2, &symmetric(&der.g_hess, n2), m);
     let hidden_entries: Vec<(usize, NodeId)> = der
         .hidden
@@ -377,6 +378,9 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
             fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]) { #jacobian }
             #[inline]
             fn constraint_jacobian_values(&self, q: &[f64], p: &[f64], values: &mut [f64]) -> bool {
+                if values.len() != #nnz {
+                    return false;
+                }
                 #jacobian_values
                 true
             }

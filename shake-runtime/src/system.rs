@@ -175,8 +175,10 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// per entry of the pattern): the numbers
     /// [`Self::constraint_jacobian`] writes, to the bit. Returns `false`
     /// (the default), leaving `values` untouched, when the system does not
-    /// provide them; the runtime then reads them out of
-    /// `constraint_jacobian`. `constrained_system!` provides them. They
+    /// provide them or `values` does not have the pattern's length; the
+    /// runtime then reads them out of `constraint_jacobian`.
+    /// `constrained_system!` and the run-time declarations
+    /// (`shake::declared`) provide them. They
     /// matter for long chains: the nonzeros of the dense m × 2d g_z lie a
     /// column (8m bytes) apart, so writing and reading them touches a
     /// cache line each, in buffers that outgrow the caches from a few

@@ -109,6 +109,9 @@ pub struct Program {
     pub constraints: Tape,
     /// g_z (m × 2d).
     pub jacobian: Tape,
+    /// g_z's entries packed: output e is the entry (i, k) =
+    /// `jacobian_pattern[e]` (the same roots as `jacobian`: the same bits).
+    pub jacobian_values: Tape,
     /// Σ λ_i ∇²g_i (2d × 2d).
     pub constraint_hessian: Tape,
     /// {g_i, H} (m).
@@ -425,6 +428,13 @@ impl Program {
         let constraints = c.tape(&g);
         let jac: Vec<_> = der.g_z.iter().map(|((i, k), n)| (i + k * m, *n)).collect();
         let jacobian = c.tape(&jac);
+        let packed: Vec<_> = der
+            .g_z
+            .iter()
+            .enumerate()
+            .map(|(e, (_, n))| (e, *n))
+            .collect();
+        let jacobian_values = c.tape(&packed);
         let constraint_hessian = c.tape(&symmetric(&der.g_hess, n2));
         let hid: Vec<_> = der
             .hidden
@@ -464,6 +474,7 @@ impl Program {
             hessian,
             constraints,
             jacobian,
+            jacobian_values,
             constraint_hessian,
             hidden,
             hidden_jacobian,
@@ -492,6 +503,7 @@ impl Program {
             &mut self.hessian,
             &mut self.constraints,
             &mut self.jacobian,
+            &mut self.jacobian_values,
             &mut self.constraint_hessian,
             &mut self.hidden,
             &mut self.hidden_jacobian,
