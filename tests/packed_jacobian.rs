@@ -53,6 +53,23 @@ constrained_system! {
     }
 }
 
+constrained_system! {
+    /// A 4-link chain whose kinetic energy couples neighbouring masses (a
+    /// constant, non-diagonal mass matrix): SHAKE's Jacobian then comes from
+    /// column groups through `grad_p`, not from the list of terms.
+    struct CoupledChain4 {
+        parameters { c }
+        const N = 4;
+        dof q[2*N], p[2*N];
+        hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + 9.81 * q[2*i+1] }
+            + sum i in 1..N { c * (p[2*i] * p[2*i-2] + p[2*i+1] * p[2*i-1]) };
+        constraints {
+            link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - 1 }
+                else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - 1 },
+        }
+    }
+}
+
 /// A point of R^{2d} from a linear congruential sequence (any point will
 /// do: the check is of two codes for the same numbers).
 fn point(seed: &mut u64, d: usize) -> (Vec<f64>, Vec<f64>) {
@@ -222,6 +239,9 @@ fn reading_g_from_the_dense_g_z_gives_the_same_run() {
     assert_eq!(same_runs(Chain16::new(1.0, 9.81), 16), 2 * 401);
     // 4 links: the fixed-size step (packed) against the slice path (dense).
     assert_eq!(same_runs(Chain4::new(1.0, 9.81), 4), 2 * 401);
+    // A coupled mass matrix: the column groups, packed (fixed size)
+    // against dense (slice path).
+    assert_eq!(same_runs(CoupledChain4::new(0.2), 4), 2 * 401);
     // Declared at run time: the tape's packed values against its g_z.
     assert_eq!(same_runs(declared_chain16(), 16), 2 * 401);
 }

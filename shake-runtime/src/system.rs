@@ -182,8 +182,10 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// matter for long chains: the nonzeros of the dense m × 2d g_z lie a
     /// column (8m bytes) apart, so writing and reading them touches a
     /// cache line each, in buffers that outgrow the caches from a few
-    /// hundred constraints on. A wrapper that changes `constraint_jacobian`
-    /// must not forward this.
+    /// hundred constraints on. A wrapper that changes `constraint_jacobian`,
+    /// `jacobian_pattern` or `constraint_count` must not forward this (the
+    /// packed values would no longer match the pattern the runtime reads
+    /// them by).
     fn constraint_jacobian_values(&self, q: &[f64], p: &[f64], values: &mut [f64]) -> bool {
         let _ = (q, p, values);
         false

@@ -254,7 +254,8 @@ impl Guard {
             return None;
         }
         let b = self.inverse_prev / (1.0 - x);
-        (b <= 2.0 * self.estimated).then_some(b)
+        // (A bound that overflowed bounds nothing: estimate instead.)
+        (b.is_finite() && b <= 2.0 * self.estimated).then_some(b)
     }
 
     /// The new state is on M to round-off: every |g_i| within
