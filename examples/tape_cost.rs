@@ -116,6 +116,14 @@ fn compare<S: ConstrainedSystem>(label: &str, src: &str, sys: &S, params: &[f64]
             Box::new(|s: &S, o: &mut [f64]| s.constraint_jacobian(&q, &p, o)),
         ),
         (
+            "g_z packed",
+            &prog.jacobian_values,
+            prog.jacobian_pattern.len(),
+            Box::new(|s: &S, o: &mut [f64]| {
+                assert!(s.constraint_jacobian_values(&q, &p, o));
+            }),
+        ),
+        (
             "Σλ∇²g",
             &prog.constraint_hessian,
             n2 * n2,

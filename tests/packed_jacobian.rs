@@ -239,8 +239,9 @@ fn reading_g_from_the_dense_g_z_gives_the_same_run() {
     assert_eq!(same_runs(Chain16::new(1.0, 9.81), 16), 2 * 401);
     // 4 links: the fixed-size step (packed) against the slice path (dense).
     assert_eq!(same_runs(Chain4::new(1.0, 9.81), 4), 2 * 401);
-    // A coupled mass matrix: the column groups, packed (fixed size)
-    // against dense (slice path).
+    // A coupled mass matrix: SHAKE's Jacobian from the column groups,
+    // packed (the fixed-size step the macro emits for m = 4) against dense
+    // (the wrapper forwards no fixed-size step: the slice path).
     assert_eq!(same_runs(CoupledChain4::new(0.2), 4), 2 * 401);
     // Declared at run time: the tape's packed values against its g_z.
     assert_eq!(same_runs(declared_chain16(), 16), 2 * 401);

@@ -4,16 +4,16 @@
 //! states which are zero:
 //!
 //! - SHAKE with explicit Störmer–Verlet on a separable H and holonomic g
-//!   (the classical SHAKE): gradients, g, the closed-form fibre flow and N
-//!   (the nondegeneracy check) only — no Hessian of H, no g_z, no
+//!   (the classical SHAKE): gradients, g, G = g_z (at most three times a
+//!   step: at the start and for SHAKE's Jacobian), the closed-form fibre
+//!   flow and N (the nondegeneracy check) only — no Hessian of H, no
 //!   Σλ∇²g, no hidden constraint or its Jacobian.
 //! - RATTLE adds {g, H} (its projection).
 //! - Nobody ever evaluates the Jacobian of the hidden constraints.
 //!
-//! Counted through `step_in_place` (the SHAKE step of `shake.rs`). Runs
-//! take the compensated step of `compensated.rs` by default, which still
-//! forms the Jacobian from g_z and the tangent map (Hessian of H): see
-//! BENCHMARKS.md.
+//! Counted through `step_in_place`. Runs take the same SHAKE step in
+//! increment form with Kahan's carry, so the counts hold for runs too
+//! (BENCHMARKS.md, section 4).
 //!
 //! Run with `--nocapture` to see the table of counts.
 
