@@ -22,20 +22,34 @@ constrained_system! {
     }
 }
 
-#[test]
-fn banded_det_and_condition_match_a_dense_computation() {
-    let sys = Chain16::new(1.0, 9.81);
-    let n = 16;
-    // A zig-zag chain at rest, on M: link k at angle ±0.4 from the vertical.
+/// The positions of a chain of n unit links hanging from the origin, link k
+/// at angle `angle(k)` from the downward vertical.
+fn chain_positions(n: usize, angle: impl Fn(usize) -> f64) -> Vec<f64> {
     let mut q = vec![0.0; 2 * n];
     let (mut x, mut y) = (0.0, 0.0);
     for k in 0..n {
-        let a: f64 = if k % 2 == 0 { 0.4 } else { -0.3 };
+        let a = angle(k);
         x += a.sin();
         y -= a.cos();
         q[2 * k] = x;
         q[2 * k + 1] = y;
     }
+    q
+}
+
+/// ‖A‖₁, the largest column sum.
+fn norm1(a: &DMatrix<f64>) -> f64 {
+    (0..a.ncols())
+        .map(|j| a.column(j).iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn banded_det_and_condition_match_a_dense_computation() {
+    let sys = Chain16::new(1.0, 9.81);
+    let n = 16;
+    // A zig-zag chain at rest, on M: link k at angle ±0.4 from the vertical.
+    let q = chain_positions(n, |k| if k % 2 == 0 { 0.4 } else { -0.3 });
     let p: Vec<f64> = (0..2 * n).map(|i| 0.1 * ((i as f64) * 0.7).sin()).collect();
     let mut integ = Integrator::new(sys, StormerVerlet, 0.01).rattle();
     let z = integ
@@ -59,11 +73,6 @@ fn banded_det_and_condition_match_a_dense_computation() {
     // it in practice) or bounded from the last state's estimate through
     // ‖N₁ − N₀‖₁, a bound kept within twice that estimate (`Guard`).
     let inv = dense.clone().try_inverse().unwrap();
-    let norm1 = |a: &DMatrix<f64>| {
-        (0..n)
-            .map(|j| a.column(j).iter().map(|v| v.abs()).sum::<f64>())
-            .fold(0.0, f64::max)
-    };
     let kappa = norm1(&dense) * norm1(&inv);
     assert!(
         info.condition <= 2.0 * kappa * (1.0 + 1e-12) && info.condition >= kappa / 3.0,
@@ -80,25 +89,12 @@ fn banded_det_and_condition_match_a_dense_computation() {
 fn the_condition_between_estimates_stays_within_twice_the_true_one() {
     let sys = Chain16::new(1.0, 9.81);
     let n = 16;
-    let mut q = vec![0.0; 2 * n];
-    let (mut x, mut y) = (0.0, 0.0);
-    for k in 0..n {
-        let a: f64 = 0.9 * (0.8 * k as f64).sin();
-        x += a.sin();
-        y -= a.cos();
-        q[2 * k] = x;
-        q[2 * k + 1] = y;
-    }
+    let q = chain_positions(n, |k| 0.9 * (0.8 * k as f64).sin());
     let p = vec![0.0; 2 * n];
     let mut integ = Integrator::new(sys, StormerVerlet, 0.01).rattle();
     let mut z = integ
         .project_to_hidden(&State::from_slices(&q, &p))
         .unwrap();
-    let norm1 = |a: &DMatrix<f64>| {
-        (0..n)
-            .map(|j| a.column(j).iter().map(|v| v.abs()).sum::<f64>())
-            .fold(0.0, f64::max)
-    };
     let mut buf = vec![0.0; n * n];
     sys.nondegeneracy_matrix(z.q.as_slice(), z.p.as_slice(), &mut buf);
     let mut before = norm1(&DMatrix::from_column_slice(n, n, &buf));
@@ -135,26 +131,20 @@ fn the_condition_between_estimates_stays_within_twice_the_true_one() {
 fn the_condition_in_a_run_never_falls_below_a_third_of_the_true_one() {
     let sys = Chain16::new(1.0, 9.81);
     let n = 16;
-    let mut q = vec![0.0; 2 * n];
-    let mut p = vec![0.0; 2 * n];
-    let (mut x, mut y) = (0.0, 0.0);
-    for k in 0..n {
-        let a: f64 = 1.2 * (0.8 * k as f64).sin();
-        x += a.sin();
-        y -= a.cos();
-        q[2 * k] = x;
-        q[2 * k + 1] = y;
-        p[2 * k] = 0.5 * k as f64;
-    }
+    let q = chain_positions(n, |k| 1.2 * (0.8 * k as f64).sin());
+    let p: Vec<f64> = (0..2 * n)
+        .map(|i| {
+            if i % 2 == 0 {
+                0.5 * (i / 2) as f64
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let mut integ = Integrator::new(sys, StormerVerlet, 0.005);
     let z0 = integ
         .project_to_hidden(&State::from_slices(&q, &p))
         .unwrap();
-    let norm1 = |a: &DMatrix<f64>| {
-        (0..n)
-            .map(|j| a.column(j).iter().map(|v| v.abs()).sum::<f64>())
-            .fold(0.0, f64::max)
-    };
     let mut buf = vec![0.0; n * n];
     sys.nondegeneracy_matrix(z0.q.as_slice(), z0.p.as_slice(), &mut buf);
     // The reference ‖N₀‖₁ of the run, at its start.

@@ -16,28 +16,8 @@ use shake::declared::DeclaredSystem;
 use shake::{
     constrained_system, ConstrainedSystem, Integrator, Options, State, Stop, StormerVerlet,
 };
+use shake_testkit::bench::systems::{Chain16, Chain4};
 use shake_testkit::models::DenseJacobian;
-
-macro_rules! chain {
-    ($name:ident, $n:literal) => {
-        constrained_system! {
-            /// A hanging chain of unit masses, the first anchored at the
-            /// origin.
-            struct $name {
-                parameters { length, gravity }
-                const N = $n;
-                dof q[2*N], p[2*N];
-                hamiltonian = sum i in 0..N { (p[2*i]^2 + p[2*i+1]^2) / 2 + gravity * q[2*i+1] };
-                constraints {
-                    link[k in 0..N]: if k == 0 { q[0]^2 + q[1]^2 - length^2 }
-                        else { (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 },
-                }
-            }
-        }
-    };
-}
-chain!(Chain4, 4);
-chain!(Chain16, 16);
 
 constrained_system! {
     /// A constraint on positions and momenta together (g_z has entries in
