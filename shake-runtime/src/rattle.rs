@@ -384,6 +384,32 @@ pub(crate) fn factor_and_check(
     }
 }
 
+/// N read and ready to factorise, wherever it is held: in the workspace
+/// ([`read_n`] copied it into `ws.jac`) or on the stack (the fixed-size
+/// classical step, `classical::fixed_m`). What
+/// [`Guard::check_n`](crate::guard::Guard::check_n) needs of it.
+pub(crate) trait FactorN {
+    /// N's order m.
+    fn order(&self) -> usize;
+    /// [`factor_and_check`]: factorises N and checks it, with ‖N⁻¹‖₁ =
+    /// `bound` when given, else estimated.
+    fn factor_and_check(&mut self, norm: f64, bound: Option<f64>) -> NondegeneracyCheck;
+    /// [`estimate_inverse`]: Hager's estimate from the factors just made.
+    fn estimate_inverse(&mut self) -> f64;
+}
+
+impl FactorN for Workspace {
+    fn order(&self) -> usize {
+        self.m
+    }
+    fn factor_and_check(&mut self, norm: f64, bound: Option<f64>) -> NondegeneracyCheck {
+        factor_and_check(self, norm, bound)
+    }
+    fn estimate_inverse(&mut self) -> f64 {
+        estimate_inverse(self)
+    }
+}
+
 /// Hager's estimate of ‖N⁻¹‖₁ from the factors [`factor_and_check`] left
 /// in `ws.jac`/`ws.piv` (m ≥ 2), started from the column the last
 /// estimate ended on.

@@ -6,13 +6,17 @@
 //! same operations in the same order (the same kick, residual, Jacobian
 //! from the same list of terms, the same banded LU kernels, the same
 //! stopping rules), so it gives the same steps to the last bit
-//! (`tests/fast_paths.rs`). Only SHAKE's Newton iteration moves to the
-//! stack: λ, r, q1, Δ and the m×m Jacobian are arrays whose lengths the
-//! compiler knows, so the loops over them unroll and the generated
-//! derivatives inline with their sizes. The checks of the new state and Π
-//! are the slice path's (`classical::check_and_project`). `tests/
-//! fast_paths.rs` compares the two paths; `shake-macros`' tests show the
-//! macro emits this step for m = 2 to 8.
+//! (`tests/fast_paths.rs`). What moves to the stack is SHAKE's Newton
+//! iteration (λ, r, q1, Δ and the m×m Jacobian), N with its factors, and
+//! Π's σ: arrays whose lengths the compiler knows, so the loops over them
+//! unroll and the generated derivatives inline with their sizes. The
+//! checks are the guard's, as on the slice path
+//! (`classical::check_and_project`). Both matrices are factorised in their
+//! band, as the slice path does: a chain's are tridiagonal from three
+//! links on (`linalg::tridiagonal`, O(m) with the recursion in
+//! registers), which took a 4-link chain's RATTLE run from 1.83 to 1.50
+//! times the hand-written step (BENCHMARKS.md, section 7.4).
+//! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
 //!
 //! A wrapper around a system must not forward
 //! [`ConstrainedSystem::classical_fixed`] (see `classical::fixed`).
@@ -21,8 +25,13 @@ use super::fixed::Substep;
 use super::{packed_jacobian, Buffers};
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::linalg::{all_finite, full_band_lu_factor, full_band_lu_solve, norm_inf, Band};
+use crate::guard::{max_abs, Guard};
+use crate::linalg::{
+    all_finite, band_lu_factor, band_lu_solve, dense_lu_factor, dense_lu_solve,
+    full_band_lu_factor, full_band_lu_solve, lu_det, norm_inf, Band,
+};
 use crate::newton::NewtonOptions;
+use crate::rattle::{estimate_inverse, FactorN, NondegeneracyCheck};
 use crate::shake::{ShakeReport, Workspace};
 use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
@@ -36,15 +45,7 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     cx: Substep<'_>,
 ) -> Option<Result<StepInfo, StepError>> {
-    // (SHAKE's Jacobian is factorised as a full M × M band: the workspace
-    // predicts narrower bands only from 12 rows on, so this holds; should
-    // it not, the slice path takes the step.)
-    if cx.q.len() != D
-        || cx.p.len() != D
-        || sys.constraint_count() != M
-        || !(2..=8).contains(&M)
-        || cx.ws.jac_band != Band::full(M)
-    {
+    if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != M || !(2..=8).contains(&M) {
         return None;
     }
     let Substep {
@@ -64,9 +65,181 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
         Ok(r) => r,
         Err(e) => return Some(Err(e.at(step, t))),
     };
-    Some(super::check_and_project(
+    Some(check_and_project::<S, D, M>(
         sys, q, p, ws, guard, &report, project, h, step, t,
     ))
+}
+
+/// `classical::check_and_project` with N on the stack: the same checks
+/// (finite, on M, N's condition, component and fibre jump, through the
+/// guard) and the same Π, computed with the same operations in the same
+/// order (the dense LU the slice path uses for m < 12), so the same bits;
+/// but N, its factors and σ live in arrays whose sizes the compiler knows,
+/// so the loops unroll and nothing is indexed through run-time lengths.
+/// N's factors are left in `ws.jac`/`ws.piv`, as `factor_n` leaves them,
+/// for the lazy Π (`classical::project`) and Hager's estimate.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    q: &mut [f64],
+    p: &mut [f64],
+    ws: &mut Workspace,
+    guard: &mut Guard,
+    report: &ShakeReport,
+    project: bool,
+    h: f64,
+    step: u64,
+    t: f64,
+) -> Result<StepInfo, StepError> {
+    let mut info = StepInfo {
+        shake_iterations: report.iterations,
+        lambda: report.lambda,
+        ..StepInfo::default()
+    };
+    Guard::finite(q, p, "state", step, t)?;
+    let scales = (max_abs(q, &[]), max_abs(&[], p));
+    guard.on_m(
+        Stage::Shake,
+        &ws.g,
+        &ws.g_size,
+        &ws.g_reads,
+        scales,
+        report.iterations,
+        step,
+        t,
+    )?;
+    let q: &[f64; D] = (&*q).try_into().expect("checked by substep");
+    let mut n = StackN::<M> {
+        a: [[0.0; M]; M],
+        piv: [0; M],
+        band: ws.n.band,
+        ws,
+    };
+    sys.nondegeneracy_matrix(q, p, n.a.as_flattened_mut());
+    let (norm, change) = n.read();
+    guard.check_n(&mut n, norm, change, report, &mut info, project, h, step, t)?;
+    if project {
+        // Π: one solve N σ = {g, H}, then the kick along the fibre.
+        let StackN { a, piv, band, ws } = n;
+        let mut sigma = [0.0; M];
+        sys.hidden_constraints(q, p, &mut sigma);
+        if band == Band::full(M) {
+            dense_lu_solve(a.as_flattened(), M, &piv, &mut sigma);
+        } else {
+            band_lu_solve(a.as_flattened(), M, band, &piv, &mut sigma);
+        }
+        ws.sigma.copy_from_slice(&sigma);
+        let mut y = *q;
+        if !sys.fibre_flow(&sigma, &mut y, p).applied() {
+            let cl = &mut ws.classical;
+            packed_jacobian(
+                sys,
+                q,
+                p,
+                (&cl.pattern, cl.whole),
+                &mut ws.g_z_1,
+                &mut cl.g1,
+            );
+            for (&(i, k), g) in cl.pattern.iter().zip(&cl.g1) {
+                p[k] -= g * sigma[i];
+            }
+        }
+        info.rattle_iterations = 1;
+    }
+    Ok(info)
+}
+
+/// N at the new state on the stack, column-major, and its factors once
+/// made in its structural band (`ws.n.band`); the workspace for N at the
+/// last checked state and for the factors' copy.
+struct StackN<'a, const M: usize> {
+    a: [[f64; M]; M],
+    piv: [usize; M],
+    band: Band,
+    ws: &'a mut Workspace,
+}
+
+impl<const M: usize> StackN<'_, M> {
+    /// `rattle::read_n` on the stack: ‖N‖₁ and ‖N − N_prev‖₁ (the entries
+    /// outside N's band are structural zeros, which add nothing), N_prev ←
+    /// N, and the fill of a banded LU zeroed.
+    #[inline(always)]
+    fn read(&mut self) -> (f64, f64) {
+        let band = self.band;
+        if band != Band::full(M) {
+            let fill = band.lower + band.upper;
+            for (j, col) in self.a.iter_mut().enumerate() {
+                col[j.saturating_sub(fill)..j.saturating_sub(band.upper)].fill(0.0);
+            }
+        }
+        let prev = &mut self.ws.n.prev[..M * M];
+        let (mut norm, mut change) = (0.0f64, 0.0f64);
+        for (col, prev) in self.a.iter().zip(prev.chunks_exact_mut(M)) {
+            let (mut sum, mut diff) = (0.0, 0.0);
+            for (&v, prev) in col.iter().zip(prev) {
+                sum += v.abs();
+                diff += (v - *prev).abs();
+                *prev = v;
+            }
+            norm = norm.max(sum);
+            change = change.max(diff);
+        }
+        (norm, change)
+    }
+}
+
+impl<const M: usize> FactorN for StackN<'_, M> {
+    fn order(&self) -> usize {
+        M
+    }
+
+    /// `rattle::factor_and_check` for m ≥ 2, on the stack.
+    #[inline(always)]
+    fn factor_and_check(&mut self, norm: f64, bound: Option<f64>) -> NondegeneracyCheck {
+        if !norm.is_finite() {
+            return NondegeneracyCheck {
+                det: f64::NAN,
+                norm,
+                inverse_norm: f64::INFINITY,
+            };
+        }
+        // `factor_n`'s kernels: the dense LU for the full band, else the
+        // banded one, whose band the spare slots of `ws.piv` record.
+        let (a, band) = (self.a.as_flattened_mut(), self.band);
+        let factored = if band == Band::full(M) {
+            dense_lu_factor(a, M, &mut self.piv)
+        } else {
+            band_lu_factor(a, M, band, &mut self.piv)
+        };
+        let ws = &mut *self.ws;
+        ws.jac[..M * M].copy_from_slice(self.a.as_flattened());
+        ws.piv[..M].copy_from_slice(&self.piv);
+        (ws.piv[M], ws.piv[M + 1]) = if band == Band::full(M) {
+            (0, 0)
+        } else {
+            (band.lower, band.upper + 1)
+        };
+        match factored {
+            Err(_) => NondegeneracyCheck {
+                det: 0.0,
+                norm,
+                inverse_norm: f64::INFINITY,
+            },
+            Ok(()) => NondegeneracyCheck {
+                det: lu_det(&ws.jac, M, &ws.piv),
+                norm,
+                inverse_norm: match bound {
+                    Some(b) => b,
+                    None => estimate_inverse(ws),
+                },
+            },
+        }
+    }
+
+    fn estimate_inverse(&mut self) -> f64 {
+        estimate_inverse(self.ws)
+    }
 }
 
 /// The stack state of SHAKE's iteration: u (the momentum increment before
@@ -171,9 +344,14 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
             }
         }
     }
-    // (The band is full: checked by `substep`.)
-    full_band_lu_factor::<M>(jac, piv)
-        .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
+    // The slice path's kernels: the full band's with its order a
+    // constant, or the banded one (a chain's: tridiagonal).
+    if band == Band::full(M) {
+        full_band_lu_factor::<M>(jac, piv)
+    } else {
+        band_lu_factor(jac, M, band, piv)
+    }
+    .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
 /// `classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
@@ -265,7 +443,11 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             need_jacobian = false;
         }
         let mut delta = it.r;
-        full_band_lu_solve::<M>(jac.as_flattened(), &piv, &mut delta);
+        if band == Band::full(M) {
+            full_band_lu_solve::<M>(jac.as_flattened(), &piv, &mut delta);
+        } else {
+            band_lu_solve(jac.as_flattened(), M, band, &piv, &mut delta);
+        }
         for (l, dl) in lambda.iter_mut().zip(&delta) {
             *l -= dl;
         }

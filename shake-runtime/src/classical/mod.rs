@@ -45,9 +45,9 @@
 //! A system that knows its d and m at compile time (every
 //! `constrained_system!`) takes the same step on stack arrays: for one
 //! constraint with N and the Jacobian as numbers and its own checks
-//! ([`fixed`]), for two to eight with SHAKE's iteration on the stack and
-//! the checks and Π of `check_and_project` ([`fixed_m`]). The functions
-//! here serve every other classical system.
+//! ([`fixed`]), for two to eight with SHAKE's iteration, N and Π on the
+//! stack, the same operations as `check_and_project` ([`fixed_m`]). The
+//! functions here serve every other classical system.
 
 pub mod fixed;
 pub mod fixed_m;
@@ -410,9 +410,8 @@ pub(crate) fn project<S: ConstrainedSystem>(
 /// M to round-off with g's scale from G0, then the guard's nondegeneracy,
 /// component and fibre-jump checks, one evaluation and factorisation of N
 /// at the new q), and, if `project`, Π: one linear solve with those
-/// factors. Shared by the slice path and the fixed-size step of 2 to 8
-/// constraints (`fixed_m`; the one-constraint step `fixed` checks with
-/// numbers instead).
+/// factors. The slice path's; the fixed-size steps do the same on the
+/// stack (`fixed_m`, and `fixed` with numbers for one constraint).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn check_and_project<S: ConstrainedSystem>(
     sys: &S,

@@ -27,8 +27,7 @@ use crate::error::{SolveError, Stage, StepError};
 use crate::linalg::{all_finite, norm_inf};
 use crate::newton::NewtonOptions;
 use crate::rattle::{
-    check_nondegeneracy, estimate_inverse, factor_and_check, read_n, NondegeneracyCheck,
-    ProjectionReport,
+    check_nondegeneracy, factor_and_check, read_n, FactorN, NondegeneracyCheck, ProjectionReport,
 };
 use crate::shake::{ShakeReport, Workspace};
 use crate::step::StepInfo;
@@ -217,15 +216,38 @@ impl Guard {
         )?;
         sys.nondegeneracy_matrix(q, p, &mut ws.n.mat);
         let (norm, change) = read_n(ws, true);
+        self.check_n(ws, norm, change, report, info, projected, h, step, t)
+    }
+
+    /// The checks of N at the new state, N read (`norm` = ‖N‖₁, `change` =
+    /// ‖N₁ − N₀‖₁) and ready to factorise in `n`: in the workspace
+    /// ([`after_shake`](Self::after_shake)) or on the stack (the
+    /// fixed-size classical step of 2 to 8 constraints,
+    /// `classical::fixed_m`). ‖N⁻¹‖₁ is the Neumann bound from the last
+    /// state's when it is sharp enough, else Hager's estimate.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub(crate) fn check_n(
+        &mut self,
+        n: &mut impl FactorN,
+        norm: f64,
+        change: f64,
+        report: &ShakeReport,
+        info: &mut StepInfo,
+        projected: bool,
+        h: f64,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
         let bound = self.inverse_bound(change);
-        let mut nd = factor_and_check(ws, norm, bound);
+        let mut nd = n.factor_and_check(norm, bound);
         if bound.is_none() || !(nd.condition(self.reference_norm) <= self.options.max_condition) {
             // No bound, or one not sharp enough to pass the limit (the
             // state is refused only on an estimate): estimate, from the
             // factors just made (none when N is singular or not finite:
             // ‖N⁻¹‖₁ is ∞ then, bound or not).
-            if bound.is_some() && ws.m >= 2 && nd.inverse_norm.is_finite() {
-                nd.inverse_norm = estimate_inverse(ws);
+            if bound.is_some() && n.order() >= 2 && nd.inverse_norm.is_finite() {
+                nd.inverse_norm = n.estimate_inverse();
             }
             self.estimated = nd.inverse_norm;
         }

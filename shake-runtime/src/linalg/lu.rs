@@ -46,7 +46,7 @@ pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<()
 
 /// The dense LU of [`lu_factor`] (rows swapped across the whole matrix).
 #[inline(always)]
-pub(super) fn dense_lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
+pub(crate) fn dense_lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     for k in 0..n {
         // Pivot: the largest entry of column k on or below the diagonal.
         let mut p = k;
@@ -93,7 +93,7 @@ pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 /// The dense part of [`lu_solve`].
 #[inline(always)]
-pub(super) fn dense_lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+pub(crate) fn dense_lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     for k in 0..n {
         b.swap(k, piv[k]);
     }

@@ -87,12 +87,14 @@ pub(crate) fn full_band_lu_solve<const N: usize>(lu: &[f64], piv: &[usize], b: &
 pub(crate) use estimate::inverse_norm1_estimate;
 pub(crate) use estimate::inverse_norm1_estimate_from;
 pub(crate) use expm::{expm, matmul};
-pub(crate) use lu::{lu_det, lu_factor, lu_solve, lu_solve_transpose};
+pub(crate) use lu::{
+    dense_lu_factor, dense_lu_solve, lu_det, lu_factor, lu_solve, lu_solve_transpose,
+};
 pub(crate) use vector::{all_finite, norm_inf, zero_short};
 #[cfg(test)]
 use {
     band::{band_lu_factor_w, band_lu_solve_transpose, band_lu_solve_transpose_w, band_lu_solve_w},
-    lu::{dense_lu_factor, dense_lu_solve, dense_lu_solve_transpose, recorded_band},
+    lu::{dense_lu_solve_transpose, recorded_band},
 };
 
 /// The matrix was exactly singular (a zero pivot) or not finite.
@@ -132,8 +134,14 @@ impl Band {
 
     /// Whether a banded factorisation pays: LU with partial pivoting fills
     /// U up to lower + upper diagonals, so the band (with its fill) must
-    /// cover well under half of the matrix.
+    /// cover well under half of the matrix. A tridiagonal band pays from
+    /// three rows on: its kernel (`tridiagonal`) carries the recursion in
+    /// registers, O(n) against the dense LU's O(n³) (a 4-link chain's
+    /// SHAKE Jacobian and N).
     pub(crate) fn pays(self, n: usize) -> bool {
+        if self == (Band { lower: 1, upper: 1 }) {
+            return n >= 3;
+        }
         n >= 12 && 4 * (2 * self.lower + self.upper + 1) <= n
     }
 }

@@ -41,7 +41,8 @@ pub(crate) struct Workspace {
     // Projection onto M (initial data).
     pub(crate) gram: Vec<f64>,
     // SHAKE's structured Jacobian.
-    /// The predicted band of SHAKE's Jacobian (full for small m).
+    /// The predicted band of SHAKE's Jacobian (full when a band does not
+    /// pay, `Band::pays`).
     pub(crate) jac_band: Band,
     /// Columns evaluated together: j ≡ c (mod groups).
     pub(crate) groups: usize,
@@ -75,7 +76,7 @@ pub(crate) struct NBuffers {
     /// N at the previous checked state, within N's band (the fold
     /// indicator of `Guard::after_shake` compares the two).
     pub(crate) prev: Vec<f64>,
-    /// The structural band of N (full for small m, or when it does not pay).
+    /// The structural band of N (full when a band does not pay).
     pub(crate) band: Band,
     /// Hager's two vectors.
     pub(crate) s1: Vec<f64>,
@@ -178,7 +179,7 @@ const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
 fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
     let (d, m) = (sys.dof(), sys.constraint_count());
     let full = Band::full(m);
-    if m < 12 {
+    if m < 3 {
         return full;
     }
     let mut n_mat = vec![UNWRITTEN; m * m];
@@ -208,7 +209,7 @@ fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
     let (d, m) = (sys.dof(), sys.constraint_count());
     let n = 2 * d;
     let full = Band::full(m);
-    if !full.pays(m) && m < 12 {
+    if m < 3 {
         return full;
     }
     let mut vars_of = vec![Vec::new(); m];
