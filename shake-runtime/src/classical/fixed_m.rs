@@ -314,8 +314,8 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
         jac[lo + j * M..=hi + j * M].fill(0.0);
     }
     if !cl.mass.is_empty() {
-        for &[k, i1, i0, at] in &cl.products {
-            let a = h * cl.mass[k];
+        for (&[_, i1, i0, at], &mass) in cl.products.iter().zip(&cl.product_mass) {
+            let a = h * mass;
             if a != 0.0 {
                 jac[at] -= (a * g1[i1]) * g0[i0];
             }

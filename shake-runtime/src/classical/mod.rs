@@ -139,8 +139,8 @@ fn jacobian<S: ConstrainedSystem>(
         // (The terms in the band are listed once per system, in the
         // order of this sum: `Buffers::products`.)
         let cl = &ws.classical;
-        for &[k, e1, e0, at] in &cl.products {
-            let a = h * cl.mass[k];
+        for (&[_, e1, e0, at], &mass) in cl.products.iter().zip(&cl.product_mass) {
+            let a = h * mass;
             // (h a_k can underflow: such a column adds nothing, even
             // against an infinite entry of G.)
             if a != 0.0 {

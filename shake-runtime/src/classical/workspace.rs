@@ -23,6 +23,8 @@ pub(crate) struct Buffers {
     /// `pattern` holding G1(i, k), the one holding G0(j, k), and the entry
     /// of the Jacobian (i + j m).
     pub(crate) products: Vec<[usize; 4]>,
+    /// a_k of each term of `products` (read with it, not through k).
+    pub(crate) product_mass: Vec<f64>,
     /// G0 = G(q0) and G1 = G at the last Jacobian's q1, packed: entry e of
     /// each is ∂g_i/∂q_k for (i, k) = `pattern[e]` (`packed_jacobian`).
     pub(crate) g0: Vec<f64>,
@@ -77,6 +79,7 @@ impl Buffers {
             mass.clear();
         }
         let products = products.unwrap_or_default();
+        let product_mass = products.iter().map(|t| mass[t[0]]).collect();
         Buffers {
             group: pattern.iter().map(|&(i, _)| i % groups).collect(),
             g0: vec![0.0; pattern.len()],
@@ -85,6 +88,7 @@ impl Buffers {
             pattern,
             mass,
             products,
+            product_mass,
             kick: vec![0.0; d],
             u: vec![0.0; d],
             v: vec![0.0; d],
