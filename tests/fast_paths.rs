@@ -79,6 +79,26 @@ fn chain_start() -> State {
     State::from_slices(&q, &p)
 }
 
+/// The bands the steps above are factorised in: a chain of 8 links takes
+/// tridiagonal kernels for SHAKE's Jacobian and N on the classical path
+/// (so `the_fixed_size_step_is_the_slice_step` compares the banded stack
+/// step with the banded slice step), and keeps the exact full Jacobian on
+/// the general path, where the predicted band would drop O(h²) terms.
+#[test]
+fn small_chains_are_banded_where_the_band_is_exact() {
+    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let sv = Integrator::new(chain, StormerVerlet, 0.01);
+    assert_eq!(sv.newton_bands(), [(1, 1), (1, 1)]);
+    let euler = Integrator::new(chain, SymplecticEuler, 0.01);
+    assert_eq!(euler.newton_bands(), [(1, 1), (1, 1)]);
+    let midpoint = Integrator::new(chain, shake::ImplicitMidpoint, 0.01);
+    assert_eq!(midpoint.newton_bands(), [(7, 7), (1, 1)]);
+    // Two constraints: the full band is the only one.
+    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let i = Integrator::new(double, StormerVerlet, 0.01);
+    assert_eq!(i.newton_bands(), [(1, 1), (1, 1)]);
+}
+
 /// From each state of a fast trajectory, one step each way; the worst
 /// difference over the tolerance.
 fn compare_steps<S: ConstrainedSystem + Clone, B: BaseMap, T: ConstrainedSystem + Clone>(
@@ -451,6 +471,22 @@ fn the_fixed_size_step_is_the_slice_step() {
         let ((a, la), (b, lb)) = (go(true), go(false));
         let (ea, eb) = (a.error.expect("fails"), b.error.expect("fails"));
         println!("double pendulum, h {h}: {ea}");
+        assert_eq!(format!("{ea:?}"), format!("{eb:?}"));
+        assert_eq!(a.trajectory.len(), b.trajectory.len());
+        assert_eq!(la, lb, "λ left by the failed step");
+    }
+    // And for eight (the banded kernels, SHAKE's Jacobian and N on the
+    // stack against the slice path's).
+    let chain = shake::models::Chain8::new(1.0, 1.0);
+    for h in [2.0, 40.0] {
+        let go = |fixed: bool| {
+            let mut i = Integrator::new(chain, StormerVerlet, h).fixed_size(fixed);
+            let out = i.run(chain_start(), Stop::Steps(20)).execute();
+            (out, i.last_multipliers().to_vec())
+        };
+        let ((a, la), (b, lb)) = (go(true), go(false));
+        let (ea, eb) = (a.error.expect("fails"), b.error.expect("fails"));
+        println!("chain of 8, h {h}: {ea}");
         assert_eq!(format!("{ea:?}"), format!("{eb:?}"));
         assert_eq!(a.trajectory.len(), b.trajectory.len());
         assert_eq!(la, lb, "λ left by the failed step");

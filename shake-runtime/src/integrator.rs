@@ -373,6 +373,17 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     pub fn last_multipliers(&self) -> &[f64] {
         &self.steps.map.ws.lambda
     }
+    /// The bands (lower, upper) that SHAKE's Jacobian and N are factorised
+    /// in, for tests (a chain's are (1, 1); a full band is (m − 1, m − 1)).
+    #[doc(hidden)]
+    pub fn newton_bands(&self) -> [(usize, usize); 2] {
+        let ws = &self.steps.map.ws;
+        [
+            (ws.jac_band.lower, ws.jac_band.upper),
+            (ws.n.band.lower, ws.n.band.upper),
+        ]
+    }
+
     pub(crate) fn check_h(&self) -> Result<(), StepError> {
         validate::step_size(self.h)?;
         validate::options(&self.guard.options)

@@ -14,8 +14,9 @@
 //! (`classical::check_and_project`). Both matrices are factorised in their
 //! band, as the slice path does: a chain's are tridiagonal from three
 //! links on (`linalg::tridiagonal`, O(m) with the recursion in
-//! registers), which took a 4-link chain's RATTLE run from 1.83 to 1.50
-//! times the hand-written step (BENCHMARKS.md, section 7.4).
+//! registers). With N on the stack that took a 4-link chain's RATTLE run
+//! from 1.90 to 1.50 times the hand-written step (BENCHMARKS.md, section
+//! 7.5).
 //! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
 //!
 //! A wrapper around a system must not forward
@@ -73,7 +74,8 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
 /// `classical::check_and_project` with N on the stack: the same checks
 /// (finite, on M, N's condition, component and fibre jump, through the
 /// guard) and the same Π, computed with the same operations in the same
-/// order (the dense LU the slice path uses for m < 12), so the same bits;
+/// order (`factor_n`'s kernels: the dense LU for the full band, else the
+/// banded one), so the same bits;
 /// but N, its factors and σ live in arrays whose sizes the compiler knows,
 /// so the loops unroll and nothing is indexed through run-time lengths.
 /// N's factors are left in `ws.jac`/`ws.piv`, as `factor_n` leaves them,

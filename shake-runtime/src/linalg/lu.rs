@@ -23,9 +23,12 @@ pub(super) fn recorded_band(piv: &[usize], n: usize) -> Option<Band> {
 /// L (unit lower, below the diagonal) and U, and `piv[k]` is the row swapped
 /// with row k at elimination step k.
 ///
-/// When `piv` has two spare slots (length ≥ n + 2) and `a` is banded
-/// narrowly enough ([`Band::pays`]), this is [`band_lu_factor`] and the band
-/// is recorded in `piv[n]`, `piv[n + 1]`; [`lu_solve`],
+/// When `piv` has two spare slots (length ≥ n + 2), n ≥ 12 and `a` is
+/// banded narrowly enough ([`Band::pays`]), this is [`band_lu_factor`] and
+/// the band is recorded in `piv[n]`, `piv[n + 1]`. (Only from 12 rows: the
+/// band is found here by scanning the matrix; N and SHAKE's Jacobian, whose
+/// bands are known from the system's structure, are banded from 3 rows by
+/// their callers.) [`lu_solve`],
 /// [`lu_solve_transpose`] and [`lu_det`] read it from there.
 pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     debug_assert!(a.len() >= n * n && piv.len() >= n);

@@ -42,7 +42,8 @@ pub(crate) struct Workspace {
     pub(crate) gram: Vec<f64>,
     // SHAKE's structured Jacobian.
     /// The predicted band of SHAKE's Jacobian (full when a band does not
-    /// pay, `Band::pays`).
+    /// pay, `Band::pays`, and below 12 constraints off the classical path,
+    /// `predicted_band`).
     pub(crate) jac_band: Band,
     /// Columns evaluated together: j ≡ c (mod groups).
     pub(crate) groups: usize,
@@ -71,10 +72,11 @@ pub(crate) struct Workspace {
 /// the buffers of its condition estimate.
 #[derive(Clone, Debug)]
 pub(crate) struct NBuffers {
-    /// N, as the system writes it.
+    /// N, as the system writes it (the slice path's; the fixed-size step
+    /// of 2 to 8 constraints reads N on the stack, `classical::fixed_m`).
     pub(crate) mat: Vec<f64>,
-    /// N at the previous checked state, within N's band (the fold
-    /// indicator of `Guard::after_shake` compares the two).
+    /// N at the previous checked state (the fold indicator of
+    /// `Guard::check_n` compares the two); zero outside N's band.
     pub(crate) prev: Vec<f64>,
     /// The structural band of N (full when a band does not pay).
     pub(crate) band: Band,
@@ -101,11 +103,14 @@ pub(crate) struct Probe {
 }
 
 impl Workspace {
-    pub(crate) fn new<S: ConstrainedSystem>(sys: &S) -> Self {
+    /// The buffers for `sys`; `classical` says whether its steps take the
+    /// classical path (`crate::classical::classical`), where SHAKE's
+    /// Jacobian −h G(q1) A G0ᵀ lies in its predicted band exactly.
+    pub(crate) fn new<S: ConstrainedSystem>(sys: &S, classical: bool) -> Self {
         let d = sys.dof();
         let m = sys.constraint_count();
         let n = 2 * d;
-        let jac_band = predicted_band(sys);
+        let jac_band = predicted_band(sys, classical);
         let groups = if jac_band == Band::full(m) {
             m
         } else {
@@ -204,12 +209,17 @@ fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
 /// (module docs): column j reaches the constraints that read a variable of
 /// X_{g_j} or of J H_zz X_{g_j}. The pattern of H_zz is the set of entries
 /// `hessian` writes (the contract of `system`: exactly the structurally
-/// nonzero ones). Small systems get the full band.
-fn predicted_band<S: ConstrainedSystem>(sys: &S) -> Band {
+/// nonzero ones). On the classical path (`classical`) that is exactly the
+/// band of −h G(q1) A G0ᵀ; on the general path it drops the O(h²) terms
+/// of a base map that applies H_zz more than once (`shake`'s module docs,
+/// "Structure: chains"), which pays only for large m: there a system of
+/// fewer than 12 constraints keeps the full band, the exact Jacobian.
+/// Fewer than 3 constraints always do.
+fn predicted_band<S: ConstrainedSystem>(sys: &S, classical: bool) -> Band {
     let (d, m) = (sys.dof(), sys.constraint_count());
     let n = 2 * d;
     let full = Band::full(m);
-    if m < 3 {
+    if m < 3 || (m < 12 && !classical) {
         return full;
     }
     let mut vars_of = vec![Vec::new(); m];

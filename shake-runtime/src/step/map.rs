@@ -41,10 +41,11 @@ pub(crate) struct StepMap<B: BaseMap> {
 impl<B: BaseMap> StepMap<B> {
     /// The map for `sys` over `base`, its buffers allocated.
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S, base: B) -> Self {
+        let classical = crate::classical::classical(sys, &base);
         StepMap {
-            ws: Workspace::new(sys),
+            ws: Workspace::new(sys, classical.is_some()),
             base_ws: base.workspace(sys.dof()),
-            classical: crate::classical::classical(sys, &base),
+            classical,
             base,
             fast_paths: true,
             fixed_size: true,
