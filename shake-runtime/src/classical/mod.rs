@@ -16,19 +16,18 @@
 //! `grad_p`, which is A·v for a quadratic T), banded like the general one
 //! (columns compressed by the predicted band, see `shake`). It is formed
 //! at λ = 0 and kept (simplified Newton), formed again only when the
-//! contraction is slow. The iteration stops on the rate it shows: with
-//! updates Δ_k contracting by θ = ‖Δ_k‖/‖Δ_{k−1}‖ < ½, the remaining error
-//! is at most θ/(1−θ)·‖Δ_k‖, and when that is below 4ε‖λ‖ the next update
-//! could not change λ (Hairer & Wanner, *Solving ODEs II*, IV.8): no
-//! confirming iteration is spent. Below 4ε‖λ‖ means below the round-off
-//! of λ itself, or below the round-off that g's own rounding puts into λ
-//! (the floor of g below, through J⁻¹, whose size the first update
-//! shows as ‖Δ₁‖/‖r(0)‖), whichever is larger. Nor is one spent once the residual is at
+//! contraction is slow. The iteration stops on an update below the
+//! round-off of λ (4ε‖λ‖, or the round-off that g's own rounding puts into
+//! λ: the floor of g below, through J⁻¹, whose size the first update shows
+//! as ‖Δ₁‖/‖r(0)‖, whichever is larger), or once the residual is at
 //! round-off: when every |g_i(q1)| is below ε Σ_k |∂g_i/∂q_k| |q_k| (what
 //! rounding q1 in its last bit changes g_i by), no update can bring q1
-//! closer to M, and the iteration stops there. (The general path's rule still holds:
-//! an update below 4ε‖λ‖ stops it, and so does stagnation at the noise
-//! floor with a fresh Jacobian.)
+//! closer to M. Stagnation at the noise floor with a fresh Jacobian stops
+//! it too. It does not stop on the contraction rate alone (θ/(1−θ)‖Δ_k‖
+//! below the tolerance, Hairer & Wanner, *Solving ODEs II*, IV.8): that
+//! saves the last, confirming update, but left |g| up to 11 times its
+//! round-off floor and the classical step 1.2e-14 from the geometric one,
+//! outside the paper's claim 2 (commit 7a8e139 withdrew it).
 //!
 //! # Projection and checks
 //!
@@ -311,9 +310,8 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
         let tol = (opts.step_tolerance * size).max(lambda_noise);
         let theta = step / prev;
         prev = step;
-        // An update at round-off; or a contraction that proves the next
-        // one would be (the remaining error of a linear iteration with
-        // ratio θ is at most θ/(1−θ) times the last update).
+        // An update at round-off (not a contraction that only predicts
+        // the next one would be: module docs).
         if step <= tol {
             break;
         }
