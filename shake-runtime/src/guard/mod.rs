@@ -188,8 +188,12 @@ impl Guard {
     /// Every check after a SHAKE (sub)step, the same on both paths: g(z1)
     /// at its round-off ([`on_m`](Self::on_m)), N's condition and the sign of det N,
     /// and λ against its linear prediction. `ws.g` holds g at the new state;
-    /// `info` receives N's condition and determinant.
+    /// `info` receives N's condition and determinant. (Not inlined: it is
+    /// the slice path's, and inlined into a fixed-size step's caller it
+    /// made the pendulum's step 4 % slower, `cargo bench --bench
+    /// step_cost`.)
     #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
     pub(crate) fn after_shake<S: ConstrainedSystem>(
         &mut self,
         sys: &S,
