@@ -14,9 +14,9 @@
 //! (`classical::check_and_project`). Both matrices are factorised in their
 //! band, as the slice path does: a chain's are tridiagonal from three
 //! links on (`linalg::tridiagonal`, O(m) with the recursion in
-//! registers). With N on the stack that took a 4-link chain's RATTLE run
-//! from 1.90 to 1.50 times the hand-written step (BENCHMARKS.md, section
-//! 7.5).
+//! registers). N on the stack (1.90 → 1.83) and the tridiagonal kernels
+//! (→ 1.50–1.53) took a 4-link chain's RATTLE run to about 1.5 times the
+//! hand-written step (BENCHMARKS.md, section 7.5).
 //! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
 //!
 //! A wrapper around a system must not forward

@@ -190,7 +190,7 @@ impl Guard {
     /// and λ against its linear prediction. `ws.g` holds g at the new state;
     /// `info` receives N's condition and determinant. (Not inlined: it is
     /// the slice path's, and inlined into a fixed-size step's caller it
-    /// made the pendulum's step 4 % slower, `cargo bench --bench
+    /// made the pendulum's step 2–4 % slower, `cargo bench --bench
     /// step_cost`.)
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]

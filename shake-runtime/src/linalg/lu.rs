@@ -26,9 +26,11 @@ pub(super) fn recorded_band(piv: &[usize], n: usize) -> Option<Band> {
 /// When `piv` has two spare slots (length ≥ n + 2), n ≥ 12 and `a` is
 /// banded narrowly enough ([`Band::pays`]), this is [`band_lu_factor`] and
 /// the band is recorded in `piv[n]`, `piv[n + 1]`. (Only from 12 rows: the
-/// band is found here by scanning the matrix; N and SHAKE's Jacobian, whose
-/// bands are known from the system's structure, are banded from 3 rows by
-/// their callers.) [`lu_solve`],
+/// band is found here by scanning the matrix. The bands of N and of
+/// SHAKE's Jacobian are known from the system's structure, and their
+/// callers use them where [`Band::pays`] says so: a tridiagonal band from
+/// 3 rows, any other from 12; SHAKE's Jacobian below 12 rows only on the
+/// classical path.) [`lu_solve`],
 /// [`lu_solve_transpose`] and [`lu_det`] read it from there.
 pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
     debug_assert!(a.len() >= n * n && piv.len() >= n);
