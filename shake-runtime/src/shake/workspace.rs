@@ -177,26 +177,42 @@ impl Workspace {
 /// call were not written (finite, so that `+=` still changes it).
 const UNWRITTEN: f64 = -7.291_538_450_712_967e-297;
 
-/// The band of N = {{H,g_i},g_j} that the system writes at all: a system
-/// writes only structurally nonzero entries (the contract of `system`), so
-/// an entry still holding a sentinel after one evaluation is zero at every
-/// point. Full when the band does not pay.
+/// The entries of a system function's output (length `len`) that it
+/// writes at all, at either of two unrelated points. A system writes only
+/// structurally nonzero entries (the contract of `system`), so an entry
+/// still holding a sentinel is zero at every point; the second point
+/// catches a hand-written function whose writes depend on the values,
+/// which one evaluation would take for a narrower structure. (The bands
+/// read from this decide what the banded LU reads: an entry missed here
+/// would be dropped from N or SHAKE's Jacobian.)
+fn written(len: usize, d: usize, eval: impl Fn(&[f64], &[f64], &mut [f64])) -> Vec<bool> {
+    let other: Vec<f64> = (0..d)
+        .map(|k| 0.3 + 0.6 * (0.7 * k as f64 + 1.1).sin())
+        .collect();
+    let mut seen = vec![false; len];
+    let mut out = vec![UNWRITTEN; len];
+    for point in [vec![0.5; d], other] {
+        out.fill(UNWRITTEN);
+        eval(&point, &point, &mut out);
+        for (s, v) in seen.iter_mut().zip(&out) {
+            *s |= v.to_bits() != UNWRITTEN.to_bits();
+        }
+    }
+    seen
+}
+
+/// The band of N = {{H,g_i},g_j} that the system writes at all
+/// ([`written`]). Full when the band does not pay.
 fn structural_band_of_n<S: ConstrainedSystem>(sys: &S) -> Band {
     let (d, m) = (sys.dof(), sys.constraint_count());
     let full = Band::full(m);
     if m < 3 {
         return full;
     }
-    let mut n_mat = vec![UNWRITTEN; m * m];
-    let point = vec![0.5; d];
-    sys.nondegeneracy_matrix(&point, &point, &mut n_mat);
-    for v in n_mat.iter_mut() {
-        *v = if v.to_bits() == UNWRITTEN.to_bits() {
-            0.0
-        } else {
-            1.0
-        };
-    }
+    let n_mat: Vec<f64> = written(m * m, d, |q, p, out| sys.nondegeneracy_matrix(q, p, out))
+        .into_iter()
+        .map(|w| if w { 1.0 } else { 0.0 })
+        .collect();
     let band = Band::of(&n_mat, m);
     if band.pays(m) {
         band
@@ -230,15 +246,9 @@ fn predicted_band<S: ConstrainedSystem>(sys: &S, classical: bool) -> Band {
             rows_of[k].push(i);
         }
     }
-    let mut hz = vec![UNWRITTEN; n * n];
-    let point = vec![0.5; d];
-    sys.hessian(&point, &point, &mut hz);
+    let hz = written(n * n, d, |q, p, out| sys.hessian(q, p, out));
     let h_rows: Vec<Vec<usize>> = (0..n)
-        .map(|c| {
-            (0..n)
-                .filter(|&r| hz[r + c * n].to_bits() != UNWRITTEN.to_bits())
-                .collect()
-        })
+        .map(|c| (0..n).filter(|&r| hz[r + c * n]).collect())
         .collect();
     let swap = |k: usize| if k < d { k + d } else { k - d };
     let mut band = Band { lower: 0, upper: 0 };
@@ -269,5 +279,22 @@ fn predicted_band<S: ConstrainedSystem>(sys: &S, classical: bool) -> Band {
         band
     } else {
         full
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::written;
+
+    #[test]
+    fn a_write_that_depends_on_the_point_is_still_seen() {
+        // Entry 2 written only where q0 ≠ 0.5, entry 0 always, entry 1 never.
+        let w = written(3, 2, |q, _, out| {
+            out[0] = 1.0;
+            if q[0] != 0.5 {
+                out[2] = 0.0;
+            }
+        });
+        assert_eq!(w, [true, false, true]);
     }
 }
