@@ -191,6 +191,10 @@ impl ConstrainedSystem for DeclaredSystem {
         self.program.constraint_count()
     }
 
+    fn quadratic_constraints(&self) -> bool {
+        self.program.quadratic_constraints
+    }
+
     fn kind(&self) -> ConstraintKind {
         match self.program.kind {
             Kind::None => ConstraintKind::None,

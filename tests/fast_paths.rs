@@ -188,6 +188,121 @@ fn the_classical_step_is_the_general_step() {
     }
 }
 
+shake::constrained_system! {
+    /// A pendulum whose rod bends with its angle, g cubic in q: SHAKE's
+    /// residual along its line is no quadratic, and Newton solves it.
+    struct CubicRod {
+        dof q[2], p[2];
+        hamiltonian = (p[0]^2 + p[1]^2) / 2 + 9.81 * q[1];
+        constraints { rod: q[0]^2 + q[1]^2 + q[0]^3 / 10 - 1 }
+    }
+}
+
+/// One constraint of degree ≤ 2 (a distance) takes the closed-form root of
+/// SHAKE's quadratic as its first iterate on the fixed-size path, where the
+/// slice path takes a Newton update and fits the quadratic through a
+/// second residual: one update fewer, the same steps to round-off. A cubic
+/// g has no closed form and iterates on both paths.
+#[test]
+fn one_distance_constraint_is_solved_in_closed_form() {
+    let pend = shake::models::Pendulum::new(1.0, 9.81);
+    let sphere = shake::models::SphericalPendulum::new(1.3, 9.81);
+    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    assert!(pend.quadratic_constraints() && sphere.quadratic_constraints());
+    assert!(double.quadratic_constraints());
+    assert!(!CubicRod::new().quadratic_constraints());
+    let x: f64 = 0.6;
+    let y = -(1.0 - x * x - x.powi(3) / 10.0).sqrt();
+    let cubic_start = State::from_slices(&[x, y], &[1.0, 0.3]);
+    let sphere_start = State::from_slices(&[0.6, 0.3, -(1.69f64 - 0.45).sqrt()], &[0.4, -0.9, 0.0]);
+    /// SHAKE's updates per step over 100 steps, fixed-size and slice path.
+    fn updates<S: ConstrainedSystem + Clone>(sys: S, z0: &State, h: f64) -> Vec<[usize; 2]> {
+        let make = |fixed| {
+            Integrator::new(sys.clone(), StormerVerlet, h)
+                .fixed_size(fixed)
+                .rattle()
+        };
+        let (mut f, mut s) = (make(true), make(false));
+        let mut zf = f.project_to_hidden(z0).unwrap();
+        let mut zs = zf.clone();
+        (0..100)
+            .map(|_| {
+                let a = f.step_in_place(&mut zf).unwrap().shake_iterations;
+                let b = s.step_in_place(&mut zs).unwrap().shake_iterations;
+                let worst = zf.distance(&zs) / (8.0 * tolerance(&zf, h));
+                assert!(worst <= 1.0, "h {h}: {worst}");
+                [a, b]
+            })
+            .collect()
+    }
+    for h in [0.01, 0.05] {
+        for (name, steps) in [
+            ("pendulum", updates(pend, &pendulum_start(), h)),
+            ("sphere", updates(sphere, &sphere_start, h)),
+        ] {
+            // The root is the first iterate; a residual a rounding above
+            // g's floor at it takes one more update, as on the slice path.
+            let one = steps.iter().filter(|s| s[0] == 1).count();
+            println!("{name}, h {h}: {one} of 100 steps in one update");
+            assert!(
+                steps.iter().all(|&[a, b]| a < b || (a == 2 && b == 2)),
+                "{name}, h {h}"
+            );
+            assert!(one >= 90, "{name}, h {h}: {one}");
+        }
+        let cubic = updates(CubicRod::new(), &cubic_start, h);
+        assert!(cubic.iter().all(|&[a, b]| a >= 2 && b >= 2), "h {h}");
+    }
+}
+
+/// A lazily projected run with a stride (the steps that end on a stored
+/// state also make its Π, the others do not) and diagnostics (σ of each
+/// stored state) takes the same bits on the fixed-size and the slice path
+/// for two to eight constraints, and the same steps to round-off for one.
+#[test]
+fn a_lazy_run_with_a_stride_shows_the_slice_path_states() {
+    let run = |sys: &dyn Fn(bool) -> shake::RunOutcome| (sys(true), sys(false));
+    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let pend = shake::models::Pendulum::new(1.0, 9.81);
+    fn go<S: ConstrainedSystem + Clone>(sys: &S, z0: &State, fixed: bool) -> shake::RunOutcome {
+        let mut i = Integrator::new(sys.clone(), StormerVerlet, 0.01)
+            .fixed_size(fixed)
+            .rattle()
+            .with_diagnostics();
+        let z0 = i.project_to_hidden(z0).unwrap();
+        i.run(z0, Stop::Steps(200)).stride(7).execute()
+    }
+    let cases = [
+        (
+            "double pendulum",
+            run(&|f| go(&double, &double_start(), f)),
+            true,
+        ),
+        ("chain of 8", run(&|f| go(&chain, &chain_start(), f)), true),
+        ("pendulum", run(&|f| go(&pend, &pendulum_start(), f)), false),
+    ];
+    for (name, (a, b), bits) in cases {
+        assert!(a.error.is_none() && b.error.is_none(), "{name}");
+        let (ta, tb) = (&a.trajectory, &b.trajectory);
+        assert_eq!(ta.len(), tb.len(), "{name}");
+        assert_eq!(ta.len(), 200 / 7 + 2, "{name}");
+        for k in 0..ta.len() {
+            let (za, zb) = (ta.state(k), tb.state(k));
+            if bits {
+                assert_eq!(za, zb, "{name}, state {k}");
+                // (The last record's λ is NaN: no step leaves it.)
+                let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(ta.sigma(k)), bits(tb.sigma(k)), "{name}, σ {k}");
+                assert_eq!(bits(ta.lambda(k)), bits(tb.lambda(k)), "{name}, λ {k}");
+            } else {
+                let worst = za.distance(&zb) / (8.0 * tolerance(&za, 0.01));
+                assert!(worst <= 1.0, "{name}, state {k}: {worst}");
+            }
+        }
+    }
+}
+
 /// The same system declared non-separable: Störmer–Verlet becomes the
 /// generalised method whose stage equations Newton solves (and the
 /// classical path does not apply).

@@ -166,6 +166,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     };
     let separable = der.separable;
     let quadratic_kinetic = der.quadratic_kinetic;
+    let quadratic_constraints = der.quadratic_constraints;
 
     // H
     let hb = coder.block(&[sys.hamiltonian]);
@@ -364,6 +365,8 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
             fn constraint_count(&self) -> usize { #m }
             #[inline]
             fn kind(&self) -> ::shake::runtime::ConstraintKind { ::shake::runtime::ConstraintKind::#kind }
+            #[inline]
+            fn quadratic_constraints(&self) -> bool { #quadratic_constraints }
             fn jacobian_pattern(&self) -> &[(usize, usize)] {
                 Self::JACOBIAN_PATTERN
             }

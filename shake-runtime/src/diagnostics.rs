@@ -65,6 +65,7 @@ pub(crate) struct Accumulator {
 }
 
 impl Accumulator {
+    #[inline]
     pub(crate) fn add(&mut self, info: &crate::StepInfo) {
         self.shake = self.shake.max(info.shake_iterations);
         self.base = self.base.max(info.base_iterations);

@@ -410,6 +410,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     ) -> Result<(), StepError> {
         self.check_h()?;
         self.carry.fill(0.0);
+        // No Π of an earlier state may be shown for this one.
+        (self.steps.map.show, self.steps.map.shown_fresh) = (false, false);
         self.guard
             .start(&self.system, q, p, &mut self.steps.map.ws, step, t)?;
         if self.system.constraint_count() > 0 {

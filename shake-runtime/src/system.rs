@@ -154,6 +154,20 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// How g depends on z; picks the fibre flow.
     fn kind(&self) -> ConstraintKind;
 
+    /// Whether every g_i is a polynomial of degree at most 2 in z (a
+    /// distance constraint |q_a − q_b|² − ℓ²): then Σ λ_i ∇²g_i is
+    /// constant, and for holonomic g and a quadratic T SHAKE's residual
+    /// along its line is exactly quadratic in λ, which the classical step
+    /// of one constraint solves in closed form (`classical::fixed`).
+    /// `constrained_system!` decides it from the expressions (the
+    /// run-time declarations report it too; their step has no fixed-size
+    /// path to use it). `false` (the default) is always safe; `true` is
+    /// read only where g's Hessian, evaluated at two points, agrees. A
+    /// wrapper that changes g must not forward `true` for a g that is not.
+    fn quadratic_constraints(&self) -> bool {
+        false
+    }
+
     /// The structurally nonzero entries (i, k) of g_z (m × 2d), k < d for
     /// ∂g_i/∂q_k and k ≥ d for ∂g_i/∂p_{k−d}, sorted by i then k. Banded
     /// patterns (chains) let the runtime pick a structured solve.

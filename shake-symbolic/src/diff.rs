@@ -182,6 +182,9 @@ pub struct Derived {
     pub kind: Kind,
     pub separable: bool,
     pub quadratic_kinetic: bool,
+    /// Every g_i is a polynomial of degree at most 2 in z (a distance
+    /// constraint): its Hessian is constant.
+    pub quadratic_constraints: bool,
 }
 
 impl Derived {
@@ -301,6 +304,7 @@ impl Derived {
             kind,
             separable,
             quadratic_kinetic,
+            quadratic_constraints: g.iter().all(|gi| graph.degree(*gi).is_some_and(|d| d <= 2)),
         }
     }
 }
@@ -361,5 +365,6 @@ pub fn aligned(
         kind: canon.kind,
         separable: canon.separable,
         quadratic_kinetic: canon.quadratic_kinetic,
+        quadratic_constraints: canon.quadratic_constraints,
     })
 }

@@ -129,6 +129,8 @@ pub struct Program {
     pub separable: bool,
     /// H = ½ pᵀAp + V(q), A constant.
     pub quadratic_kinetic: bool,
+    /// Every g_i of degree at most 2 in z.
+    pub quadratic_constraints: bool,
     /// The structurally nonzero (i, k) of g_z, sorted by i then k.
     pub jacobian_pattern: Vec<(usize, usize)>,
     /// The constraint names (`rod`, `link[3]`).
@@ -483,6 +485,7 @@ impl Program {
             kind: der.kind,
             separable: der.separable,
             quadratic_kinetic: der.quadratic_kinetic,
+            quadratic_constraints: der.quadratic_constraints,
             jacobian_pattern: der.g_z.iter().map(|e| e.0).collect(),
             constraint_names: sys.constraints.iter().map(|c| c.name.clone()).collect(),
             variable_names: sys.graph.names.vars.clone(),

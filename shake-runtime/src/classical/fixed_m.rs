@@ -34,6 +34,7 @@ use crate::linalg::{
 use crate::newton::NewtonOptions;
 use crate::rattle::{estimate_inverse, FactorN, NondegeneracyCheck};
 use crate::shake::{ShakeReport, Workspace};
+use crate::state::State;
 use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
 
@@ -61,13 +62,23 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
         guard,
         ws,
         carry,
+        show,
     } = cx;
     let report = match shake::<S, D, M>(sys, kdk, h, q, p, ws, &newton, carry) {
         Ok(r) => r,
         Err(e) => return Some(Err(e.at(step, t))),
     };
     Some(check_and_project::<S, D, M>(
-        sys, q, p, ws, guard, &report, project, h, step, t,
+        sys,
+        q,
+        p,
+        ws,
+        guard,
+        &report,
+        (project, show),
+        h,
+        step,
+        t,
     ))
 }
 
@@ -79,7 +90,8 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
 /// but N, its factors and σ live in arrays whose sizes the compiler knows,
 /// so the loops unroll and nothing is indexed through run-time lengths.
 /// N's factors are left in `ws.jac`/`ws.piv`, as `factor_n` leaves them,
-/// for the lazy Π (`classical::project`) and Hager's estimate.
+/// for the lazy Π (`classical::project`) and Hager's estimate. Without
+/// `project`, Π of the new state goes to `show` if given (the same solve).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
@@ -89,7 +101,7 @@ fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
     ws: &mut Workspace,
     guard: &mut Guard,
     report: &ShakeReport,
-    project: bool,
+    (project, show): (bool, Option<&mut State>),
     h: f64,
     step: u64,
     t: f64,
@@ -121,35 +133,51 @@ fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys.nondegeneracy_matrix(q, p, n.a.as_flattened_mut());
     let (norm, change) = n.read();
     guard.check_n(&mut n, norm, change, report, &mut info, project, h, step, t)?;
+    let StackN { a, piv, band, ws } = n;
     if project {
-        // Π: one solve N σ = {g, H}, then the kick along the fibre.
-        let StackN { a, piv, band, ws } = n;
-        let mut sigma = [0.0; M];
-        sys.hidden_constraints(q, p, &mut sigma);
-        if band == Band::full(M) {
-            dense_lu_solve(a.as_flattened(), M, &piv, &mut sigma);
-        } else {
-            band_lu_solve(a.as_flattened(), M, band, &piv, &mut sigma);
-        }
-        ws.sigma.copy_from_slice(&sigma);
-        let mut y = *q;
-        if !sys.fibre_flow(&sigma, &mut y, p).applied() {
-            let cl = &mut ws.classical;
-            packed_jacobian(
-                sys,
-                q,
-                p,
-                (&cl.pattern, cl.whole),
-                &mut ws.g_z_1,
-                &mut cl.g1,
-            );
-            for (&(i, k), g) in cl.pattern.iter().zip(&cl.g1) {
-                p[k] -= g * sigma[i];
-            }
-        }
+        project_on_stack::<S, D, M>(sys, q, p, (&a, &piv, band), ws);
         info.rattle_iterations = 1;
+    } else if let Some(z) = show {
+        z.q.as_mut_slice().copy_from_slice(q);
+        z.p.as_mut_slice().copy_from_slice(p);
+        project_on_stack::<S, D, M>(sys, q, z.p.as_mut_slice(), (&a, &piv, band), ws);
     }
     Ok(info)
+}
+
+/// Π at (q, p), p in place, with N's factors on the stack: one solve
+/// N σ = {g, H}, then the kick along the fibre (σ left in `ws.sigma`).
+#[inline(always)]
+fn project_on_stack<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    q: &[f64; D],
+    p: &mut [f64],
+    (a, piv, band): (&[[f64; M]; M], &[usize; M], Band),
+    ws: &mut Workspace,
+) {
+    let mut sigma = [0.0; M];
+    sys.hidden_constraints(q, p, &mut sigma);
+    if band == Band::full(M) {
+        dense_lu_solve(a.as_flattened(), M, piv, &mut sigma);
+    } else {
+        band_lu_solve(a.as_flattened(), M, band, piv, &mut sigma);
+    }
+    ws.sigma.copy_from_slice(&sigma);
+    let mut y = *q;
+    if !sys.fibre_flow(&sigma, &mut y, p).applied() {
+        let cl = &mut ws.classical;
+        packed_jacobian(
+            sys,
+            q,
+            p,
+            (&cl.pattern, cl.whole),
+            &mut ws.g_z_1,
+            &mut cl.g1,
+        );
+        for (&(i, k), g) in cl.pattern.iter().zip(&cl.g1) {
+            p[k] -= g * sigma[i];
+        }
+    }
 }
 
 /// N at the new state on the stack, column-major, and its factors once

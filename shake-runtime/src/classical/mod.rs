@@ -29,6 +29,12 @@
 //! round-off floor and the classical step 1.2e-14 from the geometric one,
 //! outside the paper's claim 2 (commit 7a8e139 withdrew it).
 //!
+//! For one constraint the first Newton iterate λ1 gives the quadratic
+//! r(λ) = r0 + r1 λ + r2 λ² through r(λ1), exact when g is a distance
+//! constraint; its small root is the next iterate. The fixed-size step
+//! ([`fixed`]) takes that root at once from g's constant Hessian when the
+//! system declares g of degree ≤ 2.
+//!
 //! # Projection and checks
 //!
 //! {g_i, H} = (G A p)_i is linear in p and the fibre moves p only, so

@@ -44,6 +44,11 @@ pub(crate) struct Buffers {
     pub(crate) hq: Vec<f64>,
     /// The round-off level of each g_i at the step's start.
     pub(crate) floor: Vec<f64>,
+    /// For one constraint of degree at most 2 (a distance), the nonzero
+    /// entries (j, k, ∂²g/∂q_j∂q_k) of its constant Hessian: SHAKE's
+    /// residual along its line is then the quadratic whose λ² coefficient
+    /// they give (`fixed`). Empty otherwise.
+    pub(crate) g_qq: Vec<(usize, usize, f64)>,
 }
 
 impl Buffers {
@@ -95,8 +100,48 @@ impl Buffers {
             w: vec![0.0; d],
             hq: vec![0.0; d],
             floor: vec![0.0; m],
+            g_qq: if classical && m == 1 {
+                constant_hessian(sys)
+            } else {
+                Vec::new()
+            },
         }
     }
+}
+
+/// The q-block of ∇²g of a system with one constraint that declares it of
+/// degree at most 2 ([`ConstrainedSystem::quadratic_constraints`]), as its
+/// nonzero entries (j, k, value), read at two unrelated points (no two
+/// coordinates equal, so that differences q_a − q_b do not vanish) and
+/// kept only if they agree (a constant Hessian); empty otherwise, and for
+/// d > 64 (4d² numbers to read it; the fixed-size step it serves is for
+/// small systems).
+fn constant_hessian<S: ConstrainedSystem>(sys: &S) -> Vec<(usize, usize, f64)> {
+    let d = sys.dof();
+    if !sys.quadratic_constraints() || sys.constraint_count() != 1 || d > 64 {
+        return Vec::new();
+    }
+    let n2 = 2 * d;
+    let read = |x: &dyn Fn(f64) -> f64| {
+        let q: Vec<f64> = (0..d).map(|k| x(k as f64)).collect();
+        let mut out = vec![0.0; n2 * n2];
+        sys.constraint_hessian(&q, &q, &[1.0], &mut out);
+        out
+    };
+    let (a, b) = (read(&|k| 0.5 + 0.37 * k), read(&|k| -0.375 + 0.11 * k * k));
+    let mut entries = Vec::new();
+    for k in 0..d {
+        for j in 0..d {
+            let (x, y) = (a[j + k * n2], b[j + k * n2]);
+            if x != y || !x.is_finite() {
+                return Vec::new();
+            }
+            if x != 0.0 {
+                entries.push((j, k, x));
+            }
+        }
+    }
+    entries
 }
 
 /// The diagonal of A = H_pp when H is separable with a quadratic T and A
@@ -257,5 +302,68 @@ mod tests {
             jacobian_products(&[1.0, 2.0], &col_start, cols, 3, full, 12),
             None
         );
+    }
+
+    /// Two coordinates, g = (q₀ − q₁)² or (q₀ − q₁)³ (`cubic`), claiming
+    /// degree ≤ 2 either way: only `constant_hessian`'s reads are
+    /// implemented.
+    struct Claims {
+        cubic: bool,
+    }
+
+    impl crate::system::Hamiltonian for Claims {
+        fn dof(&self) -> usize {
+            2
+        }
+        fn separable(&self) -> bool {
+            true
+        }
+        fn hamiltonian(&self, _: &[f64], _: &[f64]) -> f64 {
+            0.0
+        }
+        fn grad_q(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+        fn grad_p(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+        fn hessian(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+    }
+
+    impl ConstrainedSystem for Claims {
+        fn constraint_count(&self) -> usize {
+            1
+        }
+        fn kind(&self) -> ConstraintKind {
+            ConstraintKind::Holonomic
+        }
+        fn quadratic_constraints(&self) -> bool {
+            true
+        }
+        fn jacobian_pattern(&self) -> &[(usize, usize)] {
+            &[(0, 0), (0, 1)]
+        }
+        fn constraint_name(&self, _: usize) -> &str {
+            "g"
+        }
+        fn constraints(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+        fn constraint_jacobian(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+        fn constraint_hessian(&self, q: &[f64], _: &[f64], l: &[f64], out: &mut [f64]) {
+            // ∇²g = c [[1, −1], [−1, 1]] in the q-block of the 4 × 4.
+            let c = l[0] * if self.cubic { 6.0 * (q[0] - q[1]) } else { 2.0 };
+            (out[0], out[1], out[4], out[5]) = (c, -c, -c, c);
+        }
+        fn hidden_constraints(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+        fn hidden_constraint_jacobian(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+        fn nondegeneracy_matrix(&self, _: &[f64], _: &[f64], _: &mut [f64]) {}
+    }
+
+    #[test]
+    fn the_constant_hessian_is_read_only_where_it_is_constant() {
+        assert_eq!(
+            constant_hessian(&Claims { cubic: false }),
+            [(0, 0, 2.0), (1, 0, -2.0), (0, 1, -2.0), (1, 1, 2.0)]
+        );
+        // A claim the Hessian contradicts (6(q₀ − q₁), which two points
+        // with equal coordinates would not see) is not taken.
+        assert!(constant_hessian(&Claims { cubic: true }).is_empty());
+        // Nor is a Hessian of a system that does not claim degree ≤ 2.
+        assert!(constant_hessian(&crate::examples::Pendulum::default()).is_empty());
     }
 }

@@ -118,6 +118,7 @@ impl Guard {
     }
 
     /// No NaN or infinity in (q, p).
+    #[inline]
     pub(crate) fn finite(
         q: &[f64],
         p: &[f64],
@@ -128,6 +129,19 @@ impl Guard {
         if all_finite(q) && all_finite(p) {
             return Ok(());
         }
+        Self::not_finite(q, p, what, step, t)
+    }
+
+    /// The error of [`Self::finite`], out of the step's way.
+    #[cold]
+    #[inline(never)]
+    fn not_finite(
+        q: &[f64],
+        p: &[f64],
+        what: &'static str,
+        step: u64,
+        t: f64,
+    ) -> Result<(), StepError> {
         match q.iter().chain(p).position(|x| !x.is_finite()) {
             None => Ok(()),
             Some(entry) => Err(StepError::NonFinite {

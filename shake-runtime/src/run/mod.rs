@@ -457,6 +457,10 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 rec_q.copy_from_slice(&q);
                 rec_p.copy_from_slice(&p);
             }
+            let on_stride = k % stride == 0 || k == n;
+            // A state the run shows: its Π made by the step where it can
+            // (`StepMap::show`).
+            integ.steps.map.show = lazy && on_stride;
             let info = match integ.advance(&mut q, &mut p, per_step, k, t) {
                 Ok(info) => {
                     acc.add(&info);
@@ -468,7 +472,6 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 // The step attempted was step k, at t0 + k·h (issue 11).
                 Err(e) => end_before!(e.at(k, t0 + k as f64 * h)),
             };
-            let on_stride = k % stride == 0 || k == n;
             if on_stride {
                 if let Err(e) = integ.record(
                     &q,

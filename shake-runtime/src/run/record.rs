@@ -94,6 +94,43 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         (good, None)
     }
 
+    /// Π of a copy of step k's SHAKE state, in place in `z`, for a lazily
+    /// projecting RATTLE run; returns Π's Newton iterations.
+    fn project_shown(&mut self, z: &mut State, k: u64, t: f64) -> Result<usize, StepError> {
+        if self.steps.map.n_fresh && self.steps.map.fast_paths {
+            // The classical path: N at this q is factorised and checked.
+            crate::classical::project(
+                &self.system,
+                z.q.as_slice(),
+                z.p.as_mut_slice(),
+                &mut self.steps.map.ws,
+            );
+            return Ok(1);
+        }
+        let pr = project_hidden(
+            &self.system,
+            z.q.as_mut_slice(),
+            z.p.as_mut_slice(),
+            &mut self.steps.map.ws,
+            self.guard.newton(),
+        )
+        .map_err(|e| e.at(k, t))?;
+        // The stored state is the projection of the SHAKE state z⁻ of
+        // this step: it must be the nearby crossing of the fibre with
+        // M^H, on the component the run is on.
+        self.guard.after_lazy_projection(
+            &self.system,
+            z.q.as_slice(),
+            z.p.as_slice(),
+            &mut self.steps.map.ws,
+            &pr,
+            self.h,
+            k,
+            t,
+        )?;
+        Ok(pr.iterations)
+    }
+
     /// Stores (and shows to the observer) the state (q, p) at step k.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn record<F: FnMut(u64, f64, &State)>(
@@ -109,46 +146,22 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         observer: &mut F,
         scratch: &mut State,
     ) -> Result<(), StepError> {
-        scratch.q.as_mut_slice().copy_from_slice(q);
-        scratch.p.as_mut_slice().copy_from_slice(p);
-        let mut rattle_iterations = 0;
-        if self.method == Method::Rattle
-            && !projected
-            && self.steps.map.n_fresh
-            && self.steps.map.fast_paths
-        {
-            // The classical path: N at this q is factorised and checked.
-            crate::classical::project(
-                &self.system,
-                scratch.q.as_slice(),
-                scratch.p.as_mut_slice(),
-                &mut self.steps.map.ws,
-            );
-            rattle_iterations = 1;
-        } else if self.method == Method::Rattle && !projected {
-            let pr = project_hidden(
-                &self.system,
-                scratch.q.as_mut_slice(),
-                scratch.p.as_mut_slice(),
-                &mut self.steps.map.ws,
-                self.guard.newton(),
-            )
-            .map_err(|e| e.at(k, t))?;
-            rattle_iterations = pr.iterations;
-            // The stored state is the projection of the SHAKE state z⁻ of
-            // this step: it must be the nearby crossing of the fibre with
-            // M^H, on the component the run is on.
-            self.guard.after_lazy_projection(
-                &self.system,
-                scratch.q.as_slice(),
-                scratch.p.as_slice(),
-                &mut self.steps.map.ws,
-                &pr,
-                self.h,
-                k,
-                t,
-            )?;
-        }
+        let lazy = self.method == Method::Rattle && !projected;
+        let rattle_iterations = if lazy && self.steps.map.shown_fresh {
+            // The step that made (q, p) also made its Π (`StepMap::show`),
+            // with the operations of `classical::project`.
+            std::mem::swap(scratch, &mut self.steps.map.shown);
+            self.steps.map.shown_fresh = false;
+            1
+        } else {
+            scratch.q.as_mut_slice().copy_from_slice(q);
+            scratch.p.as_mut_slice().copy_from_slice(p);
+            if lazy {
+                self.project_shown(scratch, k, t)?
+            } else {
+                0
+            }
+        };
         // NaN or ∞ (a parameter that overflows the projection) is an error
         // at this step, never a stored state.
         crate::validate::finite(

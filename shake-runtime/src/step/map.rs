@@ -15,6 +15,7 @@ use crate::error::StepError;
 use crate::guard::Guard;
 use crate::rattle::project_hidden;
 use crate::shake::{shake_step, Workspace};
+use crate::state::State;
 use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
 
@@ -36,6 +37,16 @@ pub(crate) struct StepMap<B: BaseMap> {
     /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
     /// (set by the classical step's check and by `Integrator::begin`).
     pub(crate) n_fresh: bool,
+    /// A request, for the next [`apply`](Self::apply) only (it resets it):
+    /// when that substep is not projected, also write Π of its result
+    /// into `shown` if the path can do so where its numbers are (the
+    /// fixed-size classical step), for a lazily projecting run to show
+    /// (`run::record`, which otherwise projects a copy itself).
+    pub(crate) show: bool,
+    /// Π of the last substep's result, valid when `shown_fresh`: the same
+    /// operations on the same numbers as `classical::project`.
+    pub(crate) shown: State,
+    pub(crate) shown_fresh: bool,
 }
 
 impl<B: BaseMap> StepMap<B> {
@@ -50,6 +61,9 @@ impl<B: BaseMap> StepMap<B> {
             fast_paths: true,
             fixed_size: true,
             n_fresh: false,
+            show: false,
+            shown: State::zeros(sys.dof()),
+            shown_fresh: false,
         }
     }
 
@@ -71,8 +85,10 @@ impl<B: BaseMap> StepMap<B> {
         t: f64,
     ) -> Result<StepInfo, StepError> {
         self.n_fresh = false;
+        self.shown_fresh = false;
+        let show = std::mem::take(&mut self.show) && !project;
         if let (Some(kdk), true) = (self.classical, self.fast_paths) {
-            return self.classical_step(sys, guard, q, p, h, project, carry, step, t, kdk);
+            return self.classical_step(sys, guard, q, p, h, project, carry, step, t, kdk, show);
         }
         let newton = *guard.newton();
         let report = shake_step(
@@ -128,7 +144,8 @@ impl<B: BaseMap> StepMap<B> {
     /// [`apply`](Self::apply) on the classical path (see `classical`):
     /// SHAKE with its own Newton iteration, then one evaluation and
     /// factorisation of N at the new q for the checks and (if `project`)
-    /// for Π, which is one linear solve.
+    /// for Π, which is one linear solve. `show`: write Π of the result
+    /// into `shown` where the fixed-size step runs (see `show`).
     #[allow(clippy::too_many_arguments)]
     fn classical_step<S: ConstrainedSystem>(
         &mut self,
@@ -142,6 +159,7 @@ impl<B: BaseMap> StepMap<B> {
         step: u64,
         t: f64,
         kdk: (f64, f64),
+        show: bool,
     ) -> Result<StepInfo, StepError> {
         let newton = *guard.newton();
         if self.fixed_size {
@@ -157,9 +175,12 @@ impl<B: BaseMap> StepMap<B> {
                 guard: &mut *guard,
                 ws: &mut self.ws,
                 carry: carry.as_deref_mut(),
+                show: show.then_some(&mut self.shown),
             };
             if let Some(result) = sys.classical_fixed(cx) {
                 self.n_fresh = result.is_ok();
+                // (A fixed-size substep that succeeds has written Π there.)
+                self.shown_fresh = show && result.is_ok();
                 return result;
             }
         }

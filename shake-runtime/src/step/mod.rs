@@ -144,6 +144,9 @@ impl<B: BaseMap> Composed<B> {
                 .apply(sys, guard, q, p, h, project, at.carry, step, t);
         }
         let last = gammas.len() - 1;
+        // Π of a composed step's result is the run's to make: a request
+        // (`StepMap::show`) is for one substep's.
+        self.map.show = false;
         let reverse = self.reverse_checked(sys, guard);
         if reverse {
             self.keep_start(sys, q, p);
