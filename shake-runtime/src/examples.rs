@@ -120,6 +120,10 @@ impl ConstrainedSystem for Pendulum {
     fn kind(&self) -> ConstraintKind {
         ConstraintKind::Holonomic
     }
+    fn quadratic_constraints(&self) -> bool {
+        // |q|² − ℓ²: SHAKE's root in closed form (`classical::fixed`).
+        true
+    }
     fn jacobian_pattern(&self) -> &[(usize, usize)] {
         &[(0, 0), (0, 1)]
     }

@@ -133,11 +133,12 @@ fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys.nondegeneracy_matrix(q, p, n.a.as_flattened_mut());
     let (norm, change) = n.read();
     guard.check_n(&mut n, norm, change, report, &mut info, project, h, step, t)?;
-    let StackN { a, piv, band, ws } = n;
     if project {
+        let StackN { a, piv, band, ws } = n;
         project_on_stack::<S, D, M>(sys, q, p, (&a, &piv, band), ws);
         info.rattle_iterations = 1;
     } else if let Some(z) = show {
+        let StackN { a, piv, band, ws } = n;
         z.q.as_mut_slice().copy_from_slice(q);
         z.p.as_mut_slice().copy_from_slice(p);
         project_on_stack::<S, D, M>(sys, q, z.p.as_mut_slice(), (&a, &piv, band), ws);

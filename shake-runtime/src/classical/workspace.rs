@@ -363,7 +363,10 @@ mod tests {
         // A claim the Hessian contradicts (6(q₀ − q₁), which two points
         // with equal coordinates would not see) is not taken.
         assert!(constant_hessian(&Claims { cubic: true }).is_empty());
-        // Nor is a Hessian of a system that does not claim degree ≤ 2.
-        assert!(constant_hessian(&crate::examples::Pendulum::default()).is_empty());
+        // The hand-written pendulum claims it (|q|² − ℓ²); the Hopf
+        // constraint does not.
+        let pendulum = crate::examples::Pendulum::default();
+        assert_eq!(constant_hessian(&pendulum), [(0, 0, 2.0), (1, 1, 2.0)]);
+        assert!(constant_hessian(&crate::examples::HopfHarmonic::unit()).is_empty());
     }
 }
