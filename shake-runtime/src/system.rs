@@ -158,10 +158,9 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// distance constraint |q_a − q_b|² − ℓ²): then Σ λ_i ∇²g_i is
     /// constant, and for holonomic g and a quadratic T SHAKE's residual
     /// along its line is exactly quadratic in λ, which the classical step
-    /// of one constraint solves in closed form (`classical::fixed`).
-    /// `constrained_system!` decides it from the expressions (the
-    /// run-time declarations report it too; their step has no fixed-size
-    /// path to use it). `false` (the default) is always safe; `true` is
+    /// of one constraint solves in closed form (`classical`).
+    /// `constrained_system!` and the run-time declarations decide it from
+    /// the expressions. `false` (the default) is always safe; `true` is
     /// read only where g's Hessian, evaluated at two points, agrees. A
     /// wrapper that changes g must not forward `true` for a g that is not.
     fn quadratic_constraints(&self) -> bool {

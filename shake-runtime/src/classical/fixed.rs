@@ -5,14 +5,11 @@
 //! The map is the classical path's (the parent module): the same kick, the
 //! same Newton iteration on λ, the same checks of the guard
 //! (`crate::guard`) and the same Π, so it gives the same steps to
-//! round-off (`tests/fast_paths.rs`). One difference in the iteration: for
-//! a constraint of degree ≤ 2 (a distance, [`ConstrainedSystem::quadratic_constraints`])
-//! its first iterate is the root of g's exact quadratic along SHAKE's line
-//! (the coefficient of λ² from g's constant Hessian, read once), where
-//! the slice path takes a Newton update and then fits that quadratic
-//! through a second residual: the same root, one residual and two
-//! divisions fewer on the step's dependency chain. The rest differs only
-//! in where the numbers live:
+//! round-off (`tests/fast_paths.rs`; the same bits for a constraint of
+//! degree ≤ 2, [`ConstrainedSystem::quadratic_constraints`], whose first
+//! iterate both paths take as the root of g's exact quadratic along
+//! SHAKE's line, `classical::quadratic_root`). What differs is
+//! where the numbers live:
 //! `[f64; D]` and scalars instead of the workspace's vectors, so that the
 //! generated derivatives inline with their lengths known, the Newton
 //! matrix N = G A Gᵀ and SHAKE's Jacobian are numbers (their factorisation
@@ -144,14 +141,8 @@ fn inverse_jacobian<S: ConstrainedSystem, const D: usize>(
     Ok(1.0 / j)
 }
 
-/// The small root of SHAKE's residual r0 + r1 λ + r2 λ² when g is a
-/// constraint of degree at most 2 (`g_qq`, its constant Hessian, nonempty):
-/// along the line q1(λ) = q̃ + λ h w of [`slope`], g(q1(λ)) is exactly that
-/// quadratic, r0 = g(q̃), r1 = h G(q̃)·w, r2 = ½ h² wᵀ g_qq w. The root
-/// nearest 0 in the form without cancellation, Newton's first iterate
-/// −r0/r1 (the guard compares the two) and r1; `None` where the quadratic
-/// has no real root or the slope vanishes (the Newton iteration then
-/// decides).
+/// [`super::quadratic_root`] along the line of [`slope`]: r1 = h G(q̃)·w
+/// and wᵀ g_qq w from w = A(−G0ᵀ), g_qq g's constant Hessian.
 #[inline(always)]
 fn quadratic_root<S: ConstrainedSystem, const D: usize>(
     sys: &S,
@@ -166,13 +157,7 @@ fn quadratic_root<S: ConstrainedSystem, const D: usize>(
     for &(j, k, x) in g_qq {
         whw += w[j] * x * w[k];
     }
-    let r2 = 0.5 * h * h * whw;
-    let disc = r1 * r1 - 4.0 * r0 * r2;
-    if !(r1 != 0.0 && r1.is_finite() && disc >= 0.0) {
-        return None;
-    }
-    let root = 2.0 * r0 / (-r1 - r1.signum() * disc.sqrt());
-    root.is_finite().then_some((root, -r0 / r1, r1))
+    super::quadratic_root(h, r0, r1, whw)
 }
 
 /// One classical substep for m = 1 and d = `D` (module docs): SHAKE, the

@@ -29,11 +29,13 @@
 //! round-off floor and the classical step 1.2e-14 from the geometric one,
 //! outside the paper's claim 2 (commit 7a8e139 withdrew it).
 //!
-//! For one constraint the first Newton iterate λ1 gives the quadratic
-//! r(λ) = r0 + r1 λ + r2 λ² through r(λ1), exact when g is a distance
-//! constraint; its small root is the next iterate. The fixed-size step
-//! ([`fixed`]) takes that root at once from g's constant Hessian when the
-//! system declares g of degree ≤ 2.
+//! For one constraint of degree ≤ 2 (a distance, as the system declares,
+//! [`ConstrainedSystem::quadratic_constraints`]) r(λ) = r0 + r1 λ + r2 λ²
+//! exactly, r2 from g's constant Hessian read once: the first iterate is
+//! its small root (`quadratic_root`), on this path and on the fixed-size
+//! one with the same operations. For any other single constraint the
+//! first Newton iterate λ1 fits that quadratic through r(λ1) and its root
+//! is the next iterate.
 //!
 //! # Projection and checks
 //!
@@ -182,6 +184,55 @@ fn jacobian<S: ConstrainedSystem>(
         .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
+/// The small root of SHAKE's residual r0 + r1 λ + r2 λ² for one
+/// constraint of degree at most 2 (a distance; its constant Hessian
+/// `g_qq` read once, `Buffers`): along the line q1(λ) = q̃ + λ h w,
+/// w = A(−G0ᵀ), g(q1(λ)) is exactly that quadratic, with r0 = g(q̃),
+/// r1 = h G(q̃)·w and r2 = ½ h² wᵀ g_qq w (`whw` = wᵀ g_qq w). Returns the
+/// root nearest 0, in the form without cancellation, Newton's first
+/// iterate −r0/r1 (the guard compares the two) and r1; `None` where the
+/// quadratic has no real root or the slope vanishes (the Newton iteration
+/// then decides). Both paths take it as the first iterate, with the same
+/// operations (`fixed` on arrays, [`first_iterate`] on slices).
+#[inline(always)]
+pub(crate) fn quadratic_root(h: f64, r0: f64, r1: f64, whw: f64) -> Option<(f64, f64, f64)> {
+    let r2 = 0.5 * h * h * whw;
+    let disc = r1 * r1 - 4.0 * r0 * r2;
+    if !(r1 != 0.0 && r1.is_finite() && disc >= 0.0) {
+        return None;
+    }
+    let root = 2.0 * r0 / (-r1 - r1.signum() * disc.sqrt());
+    root.is_finite().then_some((root, -r0 / r1, r1))
+}
+
+/// [`quadratic_root`] on the slice path, at q̃ = `ws.z1` with r0 = `ws.g[0]`:
+/// G(q̃) packed, w = A(−G0ᵀ), then r1 and wᵀ g_qq w in the order of the
+/// fixed-size step's `slope` (the same bits).
+fn first_iterate<S: ConstrainedSystem>(
+    sys: &S,
+    h: f64,
+    ws: &mut Workspace,
+) -> Option<(f64, f64, f64)> {
+    let d = ws.d;
+    let cl = &mut ws.classical;
+    let at = (&cl.pattern[..], cl.whole);
+    packed_jacobian(sys, &ws.z1[..d], &ws.z0[d..], at, &mut ws.g_z_1, &mut cl.g1);
+    cl.v.fill(0.0);
+    for (&(_, k), g) in cl.pattern.iter().zip(&cl.g0) {
+        cl.v[k] = -g;
+    }
+    sys.grad_p(&ws.z0[..d], &cl.v, &mut cl.w);
+    let mut jv = 0.0;
+    for (&(_, k), g) in cl.pattern.iter().zip(&cl.g1) {
+        jv += g * cl.w[k];
+    }
+    let mut whw = 0.0;
+    for &(j, k, x) in &cl.g_qq {
+        whw += cl.w[j] * x * cl.w[k];
+    }
+    quadratic_root(h, ws.g[0], h * jv, whw)
+}
+
 /// One classical SHAKE step in place (module docs): (q, p) = z0 ∈ M
 /// becomes z1⁻, added as an increment (with Kahan's carry in runs). The
 /// final λ is in `ws.lambda`, and r = g(z1⁻) in `ws.g`.
@@ -239,7 +290,30 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     let mut r_first = 0.0;
     let not_finite =
         |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
+    // One distance constraint: the first iterate is the root of g's exact
+    // quadratic along the line (`quadratic_root`), in place of the Newton
+    // update and the fitted root below. At g's round-off there the
+    // iteration is done; otherwise it goes on from it, with the slope r1
+    // as its 1×1 Jacobian (factorised, it holds 1/r1).
+    let mut solved = false;
+    if m == 1 && !ws.classical.g_qq.is_empty() {
+        let (r0, floor) = (ws.g[0], ws.classical.floor[0]);
+        if r0.is_finite() && r0.abs() > floor {
+            if let Some((root, first, r1)) = first_iterate(sys, h, ws) {
+                r_first = r0.abs();
+                (ws.jac[0], ws.piv_j[0], need_jacobian) = (1.0 / r1, 0, false);
+                (ws.lambda[0], ws.lambda_first[0], iterations) = (root, first, 1);
+                residual(sys, h, ws, false);
+                prev = (root - first).abs();
+                fresh = false;
+                solved = ws.g[0].abs() <= floor && all_finite(&ws.dz[..d]);
+            }
+        }
+    }
     loop {
+        if solved {
+            break;
+        }
         let r = norm_inf(&ws.g);
         // (norm_inf skips NaN: look at every entry.)
         if !(r.is_finite() && all_finite(&ws.g) && all_finite(&ws.dz[..d])) {
