@@ -236,7 +236,10 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// `crate::classical::fixed::substep::<Self, D>` (m = 1) or
     /// `crate::classical::fixed_m::substep::<Self, D, M>` (m = 2 to 8):
     /// `constrained_system!` implements it for those m, since it knows d
-    /// and m at compile time. `None`
+    /// and m at compile time. The same call also takes a run's steps in
+    /// a loop of its own when the run asks it to (`classical::lane`:
+    /// nothing watches every step, so the driver hands it the stride,
+    /// the observer and the trajectory). `None`
     /// (the default) leaves the step to the runtime's slice path, which
     /// computes the same map. A wrapper that changes any of the wrapped
     /// system's functions must not forward this (the step would call the

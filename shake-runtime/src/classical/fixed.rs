@@ -22,6 +22,7 @@
 //! not forward [`ConstrainedSystem::classical_fixed`]: this step would call
 //! the wrapped system's functions, not the wrapper's.
 
+use super::lane::Lane;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
 use crate::guard::Guard;
@@ -51,6 +52,10 @@ pub struct Substep<'a> {
     /// Where to write Π of the new state when `project` is false (a lazily
     /// projecting run shows it): a substep that succeeds writes it.
     pub(crate) show: Option<&'a mut State>,
+    /// A run's steps to take in this call instead of one substep
+    /// (`classical::lane`): the step loops here, where the system's sizes
+    /// are known.
+    pub(crate) lane: Option<Lane<'a>>,
 }
 
 /// SHAKE's residual along its line: q1(λ) = q0 + h A (p0 + kick − λ G0ᵀ)
@@ -161,31 +166,66 @@ fn quadratic_root<S: ConstrainedSystem, const D: usize>(
 }
 
 /// One classical substep for m = 1 and d = `D` (module docs): SHAKE, the
-/// guard's checks, then Π if asked. `None` when the state's length is not
-/// `D` (the caller takes the slice path).
+/// guard's checks, then Π if asked; or the steps of a run's lane
+/// (`Substep::lane`, `classical::lane`). `None` when the state's length
+/// is not `D` (the caller takes the slice path).
 #[inline]
 pub fn substep<S: ConstrainedSystem, const D: usize>(
     sys: &S,
-    cx: Substep<'_>,
+    mut cx: Substep<'_>,
 ) -> Option<Result<StepInfo, StepError>> {
-    let q0: [f64; D] = (&*cx.q).try_into().ok()?;
-    let p0: [f64; D] = (&*cx.p).try_into().ok()?;
-    if sys.constraint_count() != 1 {
+    if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != 1 {
         return None;
     }
-    Some(run_substep(sys, cx, q0, p0))
+    if let Some(lane) = cx.lane.take() {
+        let one = |cx: &mut Substep<'_>, k, t, show: Option<&mut State>| {
+            in_place::<S, D>(sys, cx, k, t, show)
+        };
+        return Some(super::lane::run(&mut cx, lane, one));
+    }
+    let (step, t, show) = (cx.step, cx.t, cx.show.take());
+    Some(in_place::<S, D>(sys, &mut cx, step, t, show))
 }
 
+/// [`run_substep`] from and into `cx.q`, `cx.p` (left as they were on an
+/// error).
+#[inline(always)]
+fn in_place<S: ConstrainedSystem, const D: usize>(
+    sys: &S,
+    cx: &mut Substep<'_>,
+    step: u64,
+    t: f64,
+    show: Option<&mut State>,
+) -> Result<StepInfo, StepError> {
+    let (Ok(q0), Ok(p0)) = (<[f64; D]>::try_from(&*cx.q), <[f64; D]>::try_from(&*cx.p)) else {
+        // (`substep` checked the lengths.)
+        return Err(StepError::InvalidInput {
+            what: "state length differs from the system's fixed size",
+            value: cx.q.len() as f64,
+        });
+    };
+    let (q, p, info) = run_substep(sys, cx, q0, p0, step, t, show)?;
+    cx.q.copy_from_slice(&q);
+    cx.p.copy_from_slice(&p);
+    Ok(info)
+}
+
+/// The substep from (q0, p0) at step `step`, time `t`: the new state and
+/// what the step did, or the first check it failed. Π of the new state
+/// goes into `show` when given and the substep is not projected.
 #[inline(always)]
 fn run_substep<S: ConstrainedSystem, const D: usize>(
     sys: &S,
-    cx: Substep<'_>,
+    cx: &mut Substep<'_>,
     q0: [f64; D],
     p0: [f64; D],
-) -> Result<StepInfo, StepError> {
+    step: u64,
+    t: f64,
+    show: Option<&mut State>,
+) -> Result<([f64; D], [f64; D], StepInfo), StepError> {
     let (a, b) = cx.kdk;
-    let (h, step, t) = (cx.h, cx.step, cx.t);
-    let opts = cx.newton;
+    let h = cx.h;
+    let opts = &cx.newton;
     let at = |e: StepError| e.at(step, t);
     // The first kick and G0.
     let mut hq = [0.0; D];
@@ -321,7 +361,7 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
         }
     }
     let (mut q, mut p) = (q0, p0);
-    match cx.carry {
+    match cx.carry.as_deref_mut() {
         Some(c) => {
             let (cq, cp) = c.split_at_mut(D);
             for k in 0..D {
@@ -356,19 +396,17 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
         lambda: report.lambda,
         ..StepInfo::default()
     };
-    cx.q.copy_from_slice(&q);
-    cx.p.copy_from_slice(&p);
     // As the slice path leaves them, whether the checks below pass or not:
     // g at the new state, and the multipliers where the diagnostics read
     // them.
-    let ws = cx.ws;
+    let ws = &mut *cx.ws;
     ws.g[0] = r;
     ws.lambda[0] = lambda;
     ws.lambda_first[0] = lambda_first;
     Guard::finite(&q, &p, "state", step, t)?;
     // The guard, with N = {{H,g},g} a number: its factorisation is itself,
     // its condition estimate 1/|N|.
-    let guard = cx.guard;
+    let guard = &mut *cx.guard;
     let scales = (
         crate::guard::max_abs(&q, &[]),
         crate::guard::max_abs(&[], &p),
@@ -416,12 +454,11 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     guard.judge_shake(&nd, change, &report, &mut info, cx.project, h, step, t)?;
     if cx.project {
         (p, ws.sigma[0]) = project(sys, &q, p, n);
-        cx.p.copy_from_slice(&p);
         info.rattle_iterations = 1;
-    } else if let Some(z) = cx.show {
-        show(sys, &q, &p, n, &mut ws.sigma[0], z);
+    } else if let Some(z) = show {
+        self::show(sys, &q, &p, n, &mut ws.sigma[0], z);
     }
-    Ok(info)
+    Ok((q, p, info))
 }
 
 /// Π of the new state into `z`, for the run to show (`Substep::show`).

@@ -39,47 +39,53 @@ use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
 
 /// One classical substep for d = `D` and m = `M` (module docs): SHAKE on
-/// the stack, then the slice path's checks and Π. `None` when the state's
+/// the stack, then the slice path's checks and Π; or the steps of a run's
+/// lane (`Substep::lane`, `classical::lane`). `None` when the state's
 /// length is not `D` or the system has not `M` constraints (the caller
 /// takes the slice path).
 #[inline]
 pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
-    cx: Substep<'_>,
+    mut cx: Substep<'_>,
 ) -> Option<Result<StepInfo, StepError>> {
     if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != M || !(2..=8).contains(&M) {
         return None;
     }
-    let Substep {
-        q,
-        p,
-        h,
-        kdk,
-        project,
-        step,
-        t,
-        newton,
-        guard,
-        ws,
-        carry,
-        show,
-    } = cx;
-    let report = match shake::<S, D, M>(sys, kdk, h, q, p, ws, &newton, carry) {
-        Ok(r) => r,
-        Err(e) => return Some(Err(e.at(step, t))),
-    };
-    Some(check_and_project::<S, D, M>(
+    if let Some(lane) = cx.lane.take() {
+        let one = |cx: &mut Substep<'_>, k, t, show: Option<&mut State>| {
+            in_place::<S, D, M>(sys, cx, k, t, show)
+        };
+        return Some(super::lane::run(&mut cx, lane, one));
+    }
+    let (step, t, show) = (cx.step, cx.t, cx.show.take());
+    Some(in_place::<S, D, M>(sys, &mut cx, step, t, show))
+}
+
+/// The substep in place on `cx.q`, `cx.p` at step `step`, time `t`, Π of
+/// its result into `show` when given and the substep is not projected.
+#[inline(always)]
+fn in_place<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    cx: &mut Substep<'_>,
+    step: u64,
+    t: f64,
+    show: Option<&mut State>,
+) -> Result<StepInfo, StepError> {
+    let carry = cx.carry.as_deref_mut();
+    let report = shake::<S, D, M>(sys, cx.kdk, cx.h, cx.q, cx.p, cx.ws, &cx.newton, carry)
+        .map_err(|e| e.at(step, t))?;
+    check_and_project::<S, D, M>(
         sys,
-        q,
-        p,
-        ws,
-        guard,
+        cx.q,
+        cx.p,
+        cx.ws,
+        cx.guard,
         &report,
-        (project, show),
-        h,
+        (cx.project, show),
+        cx.h,
         step,
         t,
-    ))
+    )
 }
 
 /// `classical::check_and_project` with N on the stack: the same checks

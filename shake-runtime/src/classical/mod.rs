@@ -58,6 +58,7 @@
 
 pub mod fixed;
 pub mod fixed_m;
+pub(crate) mod lane;
 mod workspace;
 
 pub(crate) use workspace::{packed_jacobian, Buffers};

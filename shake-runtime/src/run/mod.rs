@@ -9,7 +9,11 @@
 //! - `event`: what an `on_step` observer sees.
 //!
 //! The step itself is the [`step`](crate::step) maps'; the checks are the
-//! [`guard`](crate::guard)'s.
+//! [`guard`](crate::guard)'s. A run of a system with a fixed-size
+//! classical step, with no `on_step` observer and no diagnostics, loops
+//! inside that step (`classical::lane`) and comes back here only to end:
+//! the same steps and stored states, without the layers between this
+//! loop and the substep (`tests/run_lane.rs`).
 
 mod event;
 mod record;
@@ -19,6 +23,7 @@ use std::ops::ControlFlow;
 pub use event::{StepEvent, StepObserver};
 
 use crate::base_map::BaseMap;
+use crate::classical::lane::{Lane, LaneEnd};
 use crate::diagnostics::Accumulator;
 use crate::error::StepError;
 use crate::integrator::Integrator;
@@ -407,7 +412,55 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         // stored step, to replay from it on failure (`replay_lazy`).
         let lazy = integ.method == Method::Rattle && !per_step;
         let (mut rec_q, mut rec_p) = (q.clone(), p.clone());
-        for k in 1..=n {
+        // The common case, one fixed-size classical substep a step and
+        // nothing to see between stored states, loops inside that step
+        // (`classical::lane`); on an error it hands it over here, at the
+        // step that failed, with what this loop would hold there.
+        let mut first = 1;
+        let mut handed = None;
+        if n > 0 && on_step.is_none() && !integ.diagnostics && integ.steps.composition.stages() == 1
+        {
+            let mut end = LaneEnd::default();
+            let lane = Lane {
+                first: 1,
+                last: n,
+                stride,
+                t0,
+                lazy,
+                store,
+                traj: &mut traj,
+                observer: &mut observer,
+                shown: &mut scratch,
+                prev: (&mut prev_q, &mut prev_p),
+                rec: (&mut rec_q, &mut rec_p),
+                end: &mut end,
+            };
+            let carry = (integ.compensated && integ.carrying).then_some(integ.carry.as_mut_slice());
+            let taken = integ.steps.map.run_lane(
+                &integ.system,
+                &mut integ.guard,
+                &mut q,
+                &mut p,
+                h,
+                per_step,
+                carry,
+                lane,
+            );
+            match taken {
+                None => {}
+                Some(Ok(_)) => {
+                    return RunOutcome {
+                        trajectory: traj,
+                        error: None,
+                    }
+                }
+                Some(Err(e)) => {
+                    (first, last_recorded) = (end.failed_at, end.last_recorded);
+                    handed = Some(e);
+                }
+            }
+        }
+        for k in first..=n {
             // Errors of step k carry k and the time it was computing.
             let t = t0 + k as f64 * h;
             // An error at step k ends the run with the state of step k − 1
@@ -444,6 +497,10 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                     }
                     return fail(traj, e);
                 }};
+            }
+            if let Some(e) = handed.take() {
+                // (The lane kept `prev` and `rec` as below.)
+                end_before!(e);
             }
             // The state before the step is read only when step k fails
             // with step k − 1 not stored (the end must be stored then);

@@ -141,6 +141,49 @@ impl<B: BaseMap> StepMap<B> {
         Ok(info)
     }
 
+    /// The steps of `lane` (`classical::lane`) from (q, p), in place, each
+    /// the substep [`apply`](Self::apply) would take (projected if
+    /// `project`), when the system has a fixed-size classical step and the
+    /// fast paths are on. `None`: not taken, nothing done.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn run_lane<'a, S: ConstrainedSystem>(
+        &'a mut self,
+        sys: &S,
+        guard: &'a mut Guard,
+        q: &'a mut [f64],
+        p: &'a mut [f64],
+        h: f64,
+        project: bool,
+        carry: Option<&'a mut [f64]>,
+        lane: crate::classical::lane::Lane<'a>,
+    ) -> Option<Result<StepInfo, StepError>> {
+        let kdk = self.classical?;
+        if !(self.fast_paths && self.fixed_size) {
+            return None;
+        }
+        (self.n_fresh, self.show, self.shown_fresh) = (false, false, false);
+        let newton = *guard.newton();
+        let cx = crate::classical::fixed::Substep {
+            q,
+            p,
+            h,
+            kdk,
+            project,
+            step: lane.first,
+            t: lane.t0,
+            newton,
+            guard,
+            ws: &mut self.ws,
+            carry,
+            show: None,
+            lane: Some(lane),
+        };
+        let result = sys.classical_fixed(cx)?;
+        // As `apply` leaves it after the last substep.
+        self.n_fresh = result.is_ok();
+        Some(result)
+    }
+
     /// [`apply`](Self::apply) on the classical path (see `classical`):
     /// SHAKE with its own Newton iteration, then one evaluation and
     /// factorisation of N at the new q for the checks and (if `project`)
@@ -176,6 +219,7 @@ impl<B: BaseMap> StepMap<B> {
                 ws: &mut self.ws,
                 carry: carry.as_deref_mut(),
                 show: show.then_some(&mut self.shown),
+                lane: None,
             };
             if let Some(result) = sys.classical_fixed(cx) {
                 self.n_fresh = result.is_ok();

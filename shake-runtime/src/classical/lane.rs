@@ -1,0 +1,166 @@
+//! A run's steps taken inside the fixed-size classical step's own frame:
+//! the loop of [`Run::execute`](crate::Run::execute) for the common case,
+//! where every step is one fixed-size classical substep
+//! ([`fixed`](super::fixed), [`fixed_m`](super::fixed_m)) and a stored
+//! state needs nothing but its Π, the observer and the push.
+//!
+//! The driver's loop reaches the substep through five calls (the step's
+//! composition, the integrator, the substep map, the system's hook, the
+//! fixed-size step) and stores a state through a sixth that copies it;
+//! for the pendulum those layers and the copies were a third of a run
+//! step's instructions. Here the substep is called in a loop that the
+//! compiler sees whole, with the system's sizes known, and a shown state's
+//! Π is written by the step straight into the state the observer sees.
+//!
+//! Only the loop moves, not the semantics: the same substeps (the same
+//! function, so the same bits), the same guard, the same stored states.
+//! On the first error the lane stops with what the driver's loop would
+//! hold at that step (the state before it where that is read, the SHAKE
+//! state of the last stored step of a lazily projecting run) and hands
+//! the error to the driver, which ends the run as it ends any run
+//! (`tests/fast_paths.rs` compares the two loops state by state, and on
+//! failure, trajectory and error).
+
+use super::fixed::Substep;
+use crate::error::StepError;
+use crate::linalg::all_finite;
+use crate::state::State;
+use crate::step::StepInfo;
+use crate::trajectory::Trajectory;
+
+/// A run's steps for the fixed-size substep to take in one call
+/// (`Substep::lane`): steps `first..=last` of size h from the state in the
+/// substep's (q, p), storing every `stride`-th and the last.
+pub(crate) struct Lane<'a> {
+    pub(crate) first: u64,
+    pub(crate) last: u64,
+    pub(crate) stride: u64,
+    pub(crate) t0: f64,
+    /// A RATTLE run that steps with SHAKE and shows Π of the states it
+    /// stores (the substeps are then not projected).
+    pub(crate) lazy: bool,
+    pub(crate) store: bool,
+    pub(crate) traj: &'a mut Trajectory,
+    pub(crate) observer: &'a mut dyn FnMut(u64, f64, &State),
+    /// The state the observer sees.
+    pub(crate) shown: &'a mut State,
+    /// The state before a failing step when that step's predecessor was
+    /// not stored (the run must end on it), and the SHAKE state of the
+    /// last stored step of a lazy run with stride > 1 (the run replays
+    /// from it on failure): the driver's `prev` and `rec`.
+    pub(crate) prev: (&'a mut [f64], &'a mut [f64]),
+    pub(crate) rec: (&'a mut [f64], &'a mut [f64]),
+    /// Out: the last stored step and, when a step failed, that step.
+    pub(crate) end: &'a mut LaneEnd,
+}
+
+/// Where a lane ended (`Lane::end`).
+#[derive(Copy, Clone, Debug, Default)]
+pub(crate) struct LaneEnd {
+    pub(crate) last_recorded: u64,
+    pub(crate) failed_at: u64,
+}
+
+/// Takes the lane's steps with `substep` (one fixed-size classical substep
+/// in place on `cx.q`, `cx.p`, at step k and time t, writing Π of its
+/// result into the state given, if any). `Ok` once every step is taken and
+/// every state to store is stored; on the first error at step k, the
+/// error, with `end` saying k and the last stored step, and `prev` and
+/// `rec` as described there.
+#[inline(always)]
+pub(crate) fn run<'a>(
+    cx: &mut Substep<'a>,
+    lane: Lane<'_>,
+    mut substep: impl FnMut(
+        &mut Substep<'a>,
+        u64,
+        f64,
+        Option<&mut State>,
+    ) -> Result<StepInfo, StepError>,
+) -> Result<StepInfo, StepError> {
+    let Lane {
+        first,
+        last,
+        stride,
+        t0,
+        lazy,
+        store,
+        traj,
+        observer,
+        shown,
+        prev,
+        rec,
+        end,
+    } = lane;
+    let h = cx.h;
+    let mut last_recorded = first - 1;
+    // Steps to the next multiple of the stride (a division per step is
+    // a visible part of a small system's step).
+    let mut to_stride = stride - last_recorded % stride;
+    let mut info = StepInfo::default();
+    for k in first..=last {
+        let t = t0 + k as f64 * h;
+        // What the driver keeps before step k (`Run::execute`).
+        if last_recorded != k - 1 {
+            prev.0.copy_from_slice(cx.q);
+            prev.1.copy_from_slice(cx.p);
+        } else if lazy && stride > 1 {
+            rec.0.copy_from_slice(cx.q);
+            rec.1.copy_from_slice(cx.p);
+        }
+        to_stride -= 1;
+        let on_stride = to_stride == 0 || k == last;
+        let show = (lazy && on_stride).then_some(&mut *shown);
+        info = match substep(cx, k, t, show) {
+            Ok(info) => info,
+            Err(e) => {
+                *end = LaneEnd {
+                    last_recorded,
+                    failed_at: k,
+                };
+                return Err(e.at(k, t));
+            }
+        };
+        if on_stride {
+            to_stride = stride;
+            if lazy {
+                // Π can overflow where the SHAKE state did not: NaN or ∞
+                // is an error at this step, never a stored state. (Π moves
+                // p only; q is the state the substep's guard checked.)
+                if !all_finite(shown.p.as_slice()) {
+                    *end = LaneEnd {
+                        last_recorded,
+                        failed_at: k,
+                    };
+                    return Err(not_finite(shown, k, t));
+                }
+            } else {
+                // (Finite: the substep's guard checked it.)
+                shown.q.as_mut_slice().copy_from_slice(cx.q);
+                shown.p.as_mut_slice().copy_from_slice(cx.p);
+            }
+            observer(k, t, shown);
+            if store {
+                traj.push(k, shown.q.as_slice(), shown.p.as_slice());
+            }
+            last_recorded = k;
+        }
+    }
+    end.last_recorded = last_recorded;
+    Ok(info)
+}
+
+/// The error of a shown state that is not finite, as the driver's
+/// `record` reports it.
+#[cold]
+#[inline(never)]
+fn not_finite(shown: &State, k: u64, t: f64) -> StepError {
+    match crate::validate::finite("projected state", shown.q.as_slice(), shown.p.as_slice()) {
+        Err(e) => e.at(k, t),
+        // (Unreachable: p is not finite.)
+        Ok(()) => StepError::InvalidInput {
+            what: "projected state",
+            value: f64::NAN,
+        },
+    }
+}
