@@ -11,7 +11,10 @@
 
 use std::ops::ControlFlow;
 
-use shake::{ConstrainedSystem, Integrator, RunOutcome, State, StepEvent, Stop, StormerVerlet};
+use shake::{
+    ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, RunOutcome, State,
+    StepError, StepEvent, StepInfo, Stop, StormerVerlet,
+};
 
 /// How a run is set up: SHAKE, RATTLE projecting only what it shows
 /// (lazy), or RATTLE projecting every step; the stride; whether states are
@@ -53,6 +56,7 @@ fn run<S: ConstrainedSystem + Clone>(
     let mut every = |_: &StepEvent| ControlFlow::Continue(());
     let run = integ
         .run(z0.clone(), Stop::Steps(steps))
+        .start_time(0.25)
         .stride(s.stride)
         .store(s.store)
         .observe(|k, t, z| seen.push((k, t, z.q.as_slice().to_vec(), z.p.as_slice().to_vec())));
@@ -154,6 +158,7 @@ fn failing_runs_end_alike_in_both_loops() {
     // between stored states for the strides 3 and 7.
     let pendulum = shake::models::Pendulum::new(1.0, 9.81);
     let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let chain = shake::models::Chain8::new(1.0, 1.0);
     let mut between = 0;
     for h in [0.2, 0.3, 0.45, 0.6] {
         for (name, failed) in [
@@ -164,6 +169,10 @@ fn failing_runs_end_alike_in_both_loops() {
             (
                 "double pendulum",
                 agree("double", &double, &double_start(), h, 60),
+            ),
+            (
+                "chain of 8",
+                agree("chain of 8", &chain, &chain_start(), h, 60),
             ),
         ] {
             let steps: Vec<u64> = failed.iter().map(|&(_, k)| k).collect();
@@ -178,4 +187,111 @@ fn failing_runs_end_alike_in_both_loops() {
         }
     }
     assert!(between > 0, "no lazy run failed between stored states");
+}
+
+/// The pendulum, its fixed-size step reached through a hook that counts
+/// its calls: one for a whole run through the lane, one a step through the
+/// driver's loop.
+#[derive(Clone, Debug)]
+struct Counted {
+    sys: shake::models::Pendulum,
+    calls: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+}
+
+impl Hamiltonian for Counted {
+    fn dof(&self) -> usize {
+        self.sys.dof()
+    }
+    fn separable(&self) -> bool {
+        self.sys.separable()
+    }
+    fn quadratic_kinetic(&self) -> bool {
+        self.sys.quadratic_kinetic()
+    }
+    fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
+        self.sys.hamiltonian(q, p)
+    }
+    fn grad_q(&self, q: &[f64], p: &[f64], h_q: &mut [f64]) {
+        self.sys.grad_q(q, p, h_q)
+    }
+    fn grad_p(&self, q: &[f64], p: &[f64], h_p: &mut [f64]) {
+        self.sys.grad_p(q, p, h_p)
+    }
+    fn hessian(&self, q: &[f64], p: &[f64], h_zz: &mut [f64]) {
+        self.sys.hessian(q, p, h_zz)
+    }
+}
+
+impl ConstrainedSystem for Counted {
+    fn constraint_count(&self) -> usize {
+        self.sys.constraint_count()
+    }
+    fn kind(&self) -> ConstraintKind {
+        self.sys.kind()
+    }
+    fn quadratic_constraints(&self) -> bool {
+        self.sys.quadratic_constraints()
+    }
+    fn jacobian_pattern(&self) -> &[(usize, usize)] {
+        self.sys.jacobian_pattern()
+    }
+    fn constraint_name(&self, i: usize) -> &str {
+        self.sys.constraint_name(i)
+    }
+    fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) {
+        self.sys.constraints(q, p, g)
+    }
+    fn constraint_jacobian(&self, q: &[f64], p: &[f64], g_z: &mut [f64]) {
+        self.sys.constraint_jacobian(q, p, g_z)
+    }
+    fn constraint_hessian(&self, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) {
+        self.sys.constraint_hessian(q, p, lambda, out)
+    }
+    fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
+        self.sys.hidden_constraints(q, p, out)
+    }
+    fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
+        self.sys.hidden_constraint_jacobian(q, p, out)
+    }
+    fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]) {
+        self.sys.nondegeneracy_matrix(q, p, n)
+    }
+    fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
+        self.sys.fibre_flow(lambda, q, p)
+    }
+    fn classical_fixed(
+        &self,
+        cx: shake::runtime::classical::fixed::Substep<'_>,
+    ) -> Option<Result<StepInfo, StepError>> {
+        self.calls
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        shake::runtime::classical::fixed::substep::<Self, 2>(self, cx)
+    }
+}
+
+#[test]
+fn a_run_takes_the_lane_unless_every_step_is_watched() {
+    let sys = Counted {
+        sys: shake::models::Pendulum::new(1.0, 9.81),
+        calls: Default::default(),
+    };
+    let s = Setup {
+        method: "lazy",
+        stride: 3,
+        store: true,
+        compensated: true,
+    };
+    let calls = |watched| {
+        sys.calls.store(0, std::sync::atomic::Ordering::Relaxed);
+        let (out, _) = run(&sys, &pendulum_start(), 0.01, 40, s, watched);
+        assert!(out.error.is_none());
+        sys.calls.load(std::sync::atomic::Ordering::Relaxed)
+    };
+    // (The run's start evaluates nothing through the hook.)
+    assert_eq!(calls(false), 1, "the whole run in one call");
+    assert_eq!(calls(true), 40, "one call a step");
+    // And the lane's run of the wrapper is the pendulum's own.
+    let (a, _) = run(&sys, &pendulum_start(), 0.01, 40, s, false);
+    let (b, _) = run(&sys.sys, &pendulum_start(), 0.01, 40, s, false);
+    assert_eq!(a, b);
 }

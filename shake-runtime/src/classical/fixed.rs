@@ -178,8 +178,14 @@ pub fn substep<S: ConstrainedSystem, const D: usize>(
         return None;
     }
     if let Some(lane) = cx.lane.take() {
-        let one = |cx: &mut Substep<'_>, k, t, show: Option<&mut State>| {
-            in_place::<S, D>(sys, cx, k, t, show)
+        let one = |cx: &mut Substep<'_>,
+                   (q, p): (&mut [f64; D], &mut [f64; D]),
+                   k,
+                   t,
+                   show: Option<&mut State>| {
+            let info;
+            (*q, *p, info) = run_substep::<S, D>(sys, cx, *q, *p, k, t, show)?;
+            Ok(info)
         };
         return Some(super::lane::run(&mut cx, lane, one));
     }

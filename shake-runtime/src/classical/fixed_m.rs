@@ -52,32 +52,38 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
         return None;
     }
     if let Some(lane) = cx.lane.take() {
-        let one = |cx: &mut Substep<'_>, k, t, show: Option<&mut State>| {
-            in_place::<S, D, M>(sys, cx, k, t, show)
+        let one = |cx: &mut Substep<'_>,
+                   (q, p): (&mut [f64; D], &mut [f64; D]),
+                   k,
+                   t,
+                   show: Option<&mut State>| {
+            in_place::<S, D, M>(sys, cx, (q, p), k, t, show)
         };
         return Some(super::lane::run(&mut cx, lane, one));
     }
     let (step, t, show) = (cx.step, cx.t, cx.show.take());
-    Some(in_place::<S, D, M>(sys, &mut cx, step, t, show))
+    let (q, p) = (std::mem::take(&mut cx.q), std::mem::take(&mut cx.p));
+    Some(in_place::<S, D, M>(sys, &mut cx, (q, p), step, t, show))
 }
 
-/// The substep in place on `cx.q`, `cx.p` at step `step`, time `t`, Π of
-/// its result into `show` when given and the substep is not projected.
+/// The substep in place on (q, p) at step `step`, time `t`, Π of its
+/// result into `show` when given and the substep is not projected.
 #[inline(always)]
 fn in_place<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     cx: &mut Substep<'_>,
+    (q, p): (&mut [f64], &mut [f64]),
     step: u64,
     t: f64,
     show: Option<&mut State>,
 ) -> Result<StepInfo, StepError> {
     let carry = cx.carry.as_deref_mut();
-    let report = shake::<S, D, M>(sys, cx.kdk, cx.h, cx.q, cx.p, cx.ws, &cx.newton, carry)
+    let report = shake::<S, D, M>(sys, cx.kdk, cx.h, q, p, cx.ws, &cx.newton, carry)
         .map_err(|e| e.at(step, t))?;
     check_and_project::<S, D, M>(
         sys,
-        cx.q,
-        cx.p,
+        q,
+        p,
         cx.ws,
         cx.guard,
         &report,

@@ -10,8 +10,9 @@
 //!
 //! The step itself is the [`step`](crate::step) maps'; the checks are the
 //! [`guard`](crate::guard)'s. A run of a system with a fixed-size
-//! classical step, with no `on_step` observer and no diagnostics, loops
-//! inside that step (`classical::lane`) and comes back here only to end:
+//! classical step (one substep a step, fast paths and fixed sizes on),
+//! with no `on_step` observer and no diagnostics, loops inside that step
+//! (`classical::lane`) and comes back here only to end:
 //! the same steps and stored states, without the layers between this
 //! loop and the substep (`tests/run_lane.rs`).
 
@@ -447,6 +448,10 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 lane,
             );
             match taken {
+                // (A hook that answered without entering the lane, one not
+                // built on the runtime's fixed-size step, leaves the run to
+                // this loop.)
+                _ if !end.entered => {}
                 None => {}
                 Some(Ok(_)) => {
                     return RunOutcome {

@@ -144,7 +144,9 @@ impl<B: BaseMap> StepMap<B> {
     /// The steps of `lane` (`classical::lane`) from (q, p), in place, each
     /// the substep [`apply`](Self::apply) would take (projected if
     /// `project`), when the system has a fixed-size classical step and the
-    /// fast paths are on. `None`: not taken, nothing done.
+    /// fast paths are on. `None`: not taken, no step done (the one-shot
+    /// flags `n_fresh`, `show`, `shown_fresh` are reset, as `apply` resets
+    /// them).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn run_lane<'a, S: ConstrainedSystem>(
         &'a mut self,
