@@ -295,3 +295,26 @@ fn a_run_takes_the_lane_unless_every_step_is_watched() {
     let (b, _) = run(&sys.sys, &pendulum_start(), 0.01, 40, s, false);
     assert_eq!(a, b);
 }
+
+/// A run between two single steps leaves nothing the second one reads:
+/// `step_in_place` from the state it returned before the run starts from
+/// that state as a new integrator would, not from the guard and N's
+/// buffers as the run left them (whose fold indicator and condition bound
+/// would compare N with N at the run's last state).
+#[test]
+fn a_run_between_single_steps_changes_nothing_they_read() {
+    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let fresh = || Integrator::new(double, StormerVerlet, 0.01);
+    let mut z = double_start();
+    let mut with_run = fresh();
+    with_run.step_in_place(&mut z).unwrap();
+    let z1 = z.clone();
+    let elsewhere = State::from_slices(&[0.0, -1.0, 0.0, -1.7], &[1.0, 0.0, 2.5, 0.0]);
+    let out = with_run.run(elsewhere, Stop::Steps(50)).execute();
+    assert!(out.error.is_none());
+    let info = with_run.step_in_place(&mut z).unwrap();
+    let mut expected_z = z1.clone();
+    let expected = fresh().step_in_place(&mut expected_z).unwrap();
+    assert_eq!(info, expected);
+    assert_eq!(z, expected_z);
+}

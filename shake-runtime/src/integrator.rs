@@ -410,6 +410,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     ) -> Result<(), StepError> {
         self.check_h()?;
         self.carry.fill(0.0);
+        // The guard and N's buffers now describe this state: a later
+        // single step from the state `step_in_place` returned before must
+        // start afresh, not resume from them.
+        self.checked_valid = false;
         // No Π of an earlier state may be shown for this one.
         (self.steps.map.show, self.steps.map.shown_fresh) = (false, false);
         self.guard
