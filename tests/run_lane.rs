@@ -11,6 +11,7 @@
 
 use std::ops::ControlFlow;
 
+use shake::runtime::classical::fixed::Substep;
 use shake::{
     ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, RunOutcome, State,
     StepError, StepEvent, StepInfo, Stop, StormerVerlet,
@@ -189,16 +190,37 @@ fn failing_runs_end_alike_in_both_loops() {
     assert!(between > 0, "no lazy run failed between stored states");
 }
 
-/// The pendulum, its fixed-size step reached through a hook that counts
-/// its calls: one for a whole run through the lane, one a step through the
-/// driver's loop.
-#[derive(Clone, Debug)]
-struct Counted {
-    sys: shake::models::Pendulum,
+/// A system's fixed-size step reached through a hook that counts its
+/// calls (one for a whole run through the lane, one a step through the
+/// driver's loop); optionally, Π's right-hand side {g, H} made infinite
+/// once the first coordinate's height q[1] is above `blow_up` (a Π that
+/// overflows where SHAKE did not).
+#[derive(Clone)]
+struct Counted<S> {
+    sys: S,
     calls: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    hook: for<'a> fn(&Self, Substep<'a>) -> Option<Result<StepInfo, StepError>>,
+    blow_up: f64,
 }
 
-impl Hamiltonian for Counted {
+impl<S> Counted<S> {
+    fn new(
+        sys: S,
+        hook: for<'a> fn(&Self, Substep<'a>) -> Option<Result<StepInfo, StepError>>,
+    ) -> Self {
+        Counted {
+            sys,
+            calls: Default::default(),
+            hook,
+            blow_up: f64::INFINITY,
+        }
+    }
+    fn calls(&self) -> usize {
+        self.calls.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
+impl<S: ConstrainedSystem> Hamiltonian for Counted<S> {
     fn dof(&self) -> usize {
         self.sys.dof()
     }
@@ -222,7 +244,7 @@ impl Hamiltonian for Counted {
     }
 }
 
-impl ConstrainedSystem for Counted {
+impl<S: ConstrainedSystem> ConstrainedSystem for Counted<S> {
     fn constraint_count(&self) -> usize {
         self.sys.constraint_count()
     }
@@ -248,7 +270,10 @@ impl ConstrainedSystem for Counted {
         self.sys.constraint_hessian(q, p, lambda, out)
     }
     fn hidden_constraints(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
-        self.sys.hidden_constraints(q, p, out)
+        self.sys.hidden_constraints(q, p, out);
+        if q[1] > self.blow_up {
+            out[0] = f64::INFINITY;
+        }
     }
     fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], out: &mut [f64]) {
         self.sys.hidden_constraint_jacobian(q, p, out)
@@ -259,41 +284,84 @@ impl ConstrainedSystem for Counted {
     fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         self.sys.fibre_flow(lambda, q, p)
     }
-    fn classical_fixed(
-        &self,
-        cx: shake::runtime::classical::fixed::Substep<'_>,
-    ) -> Option<Result<StepInfo, StepError>> {
+    fn classical_fixed(&self, cx: Substep<'_>) -> Option<Result<StepInfo, StepError>> {
         self.calls
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        shake::runtime::classical::fixed::substep::<Self, 2>(self, cx)
+        (self.hook)(self, cx)
     }
+}
+
+type Pendulum = shake::models::Pendulum;
+type Double = shake::models::DoublePendulum;
+
+fn pendulum_hook<'a>(
+    s: &Counted<Pendulum>,
+    cx: Substep<'a>,
+) -> Option<Result<StepInfo, StepError>> {
+    shake::runtime::classical::fixed::substep::<Counted<Pendulum>, 2>(s, cx)
+}
+
+fn double_hook<'a>(s: &Counted<Double>, cx: Substep<'a>) -> Option<Result<StepInfo, StepError>> {
+    shake::runtime::classical::fixed_m::substep::<Counted<Double>, 4, 2>(s, cx)
 }
 
 #[test]
 fn a_run_takes_the_lane_unless_every_step_is_watched() {
-    let sys = Counted {
-        sys: shake::models::Pendulum::new(1.0, 9.81),
-        calls: Default::default(),
-    };
     let s = Setup {
         method: "lazy",
         stride: 3,
         store: true,
         compensated: true,
     };
-    let calls = |watched| {
-        sys.calls.store(0, std::sync::atomic::Ordering::Relaxed);
-        let (out, _) = run(&sys, &pendulum_start(), 0.01, 40, s, watched);
+    let pendulum = Counted::new(Pendulum::new(1.0, 9.81), pendulum_hook);
+    let double = Counted::new(Double::new(1.0, 0.7, 9.81), double_hook);
+    for watched in [false, true] {
+        let (out, _) = run(&pendulum, &pendulum_start(), 0.01, 40, s, watched);
         assert!(out.error.is_none());
-        sys.calls.load(std::sync::atomic::Ordering::Relaxed)
-    };
-    // (The run's start evaluates nothing through the hook.)
-    assert_eq!(calls(false), 1, "the whole run in one call");
-    assert_eq!(calls(true), 40, "one call a step");
-    // And the lane's run of the wrapper is the pendulum's own.
-    let (a, _) = run(&sys, &pendulum_start(), 0.01, 40, s, false);
-    let (b, _) = run(&sys.sys, &pendulum_start(), 0.01, 40, s, false);
+        let (out, _) = run(&double, &double_start(), 0.01, 40, s, watched);
+        assert!(out.error.is_none());
+    }
+    // (The run's start evaluates nothing through the hook.) One call for
+    // the run through the lane, then one a step: one to eight constraints
+    // take the lane.
+    assert_eq!(pendulum.calls(), 1 + 40, "one constraint");
+    assert_eq!(double.calls(), 1 + 40, "two constraints");
+    // And the lane's run of the wrapper is the system's own.
+    let (a, _) = run(&pendulum, &pendulum_start(), 0.01, 40, s, false);
+    let (b, _) = run(&pendulum.sys, &pendulum_start(), 0.01, 40, s, false);
     assert_eq!(a, b);
+}
+
+/// A Π that overflows at a stored state ends the run there with the
+/// driver's error (`record`'s finiteness check), in both loops, for a
+/// lazily projected run (Π of the shown states) and for one projecting
+/// every step (where Π follows the step's own finiteness check).
+#[test]
+fn an_overflowing_projection_ends_both_loops_alike() {
+    let mut sys = Counted::new(Pendulum::new(1.0, 9.81), pendulum_hook);
+    // The bob rises from q[1] = −0.6: a few steps in.
+    sys.blow_up = -0.55;
+    for method in ["lazy", "every"] {
+        for stride in [1, 4] {
+            let s = Setup {
+                method,
+                stride,
+                store: true,
+                compensated: true,
+            };
+            let (lane, seen_lane) = run(&sys, &pendulum_start(), 0.01, 200, s, false);
+            let (driver, seen_driver) = run(&sys, &pendulum_start(), 0.01, 200, s, true);
+            assert_eq!(lane, driver, "{s:?}");
+            assert_eq!(seen_lane, seen_driver, "{s:?}");
+            let e = lane.error.expect("Π overflows");
+            assert!(matches!(e, StepError::NonFinite { .. }), "{e:?}");
+            assert!(e.step() > stride, "{e:?}");
+            // Nothing non-finite was stored or shown.
+            assert!(seen_lane
+                .iter()
+                .all(|(_, _, q, p)| q.iter().chain(p).all(|x| x.is_finite())));
+        }
+    }
 }
 
 /// A run between two single steps leaves nothing the second one reads:

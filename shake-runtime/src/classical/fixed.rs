@@ -404,7 +404,8 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     };
     // As the slice path leaves them, whether the checks below pass or not:
     // g at the new state, and the multipliers where the diagnostics read
-    // them.
+    // them. (The state itself goes to the caller only if they pass; after
+    // a failed step nothing reads it.)
     let ws = &mut *cx.ws;
     ws.g[0] = r;
     ws.lambda[0] = lambda;
@@ -461,6 +462,8 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     if cx.project {
         (p, ws.sigma[0]) = project(sys, &q, p, n);
         info.rattle_iterations = 1;
+        // (Π can overflow where SHAKE did not: `check_and_project`.)
+        Guard::finite(&q, &p, "state", step, t)?;
     } else if let Some(z) = show {
         self::show(sys, &q, &p, n, &mut ws.sigma[0], z);
     }

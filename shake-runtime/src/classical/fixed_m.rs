@@ -62,6 +62,8 @@ pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
         return Some(super::lane::run(&mut cx, lane, one));
     }
     let (step, t, show) = (cx.step, cx.t, cx.show.take());
+    // (The state is lent to `in_place` apart from `cx`, which it does not
+    // read it through.)
     let (q, p) = (std::mem::take(&mut cx.q), std::mem::take(&mut cx.p));
     Some(in_place::<S, D, M>(sys, &mut cx, (q, p), step, t, show))
 }
@@ -149,6 +151,8 @@ fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
         let StackN { a, piv, band, ws } = n;
         project_on_stack::<S, D, M>(sys, q, p, (&a, &piv, band), ws);
         info.rattle_iterations = 1;
+        // (Π can overflow where SHAKE did not: `classical::check_and_project`.)
+        Guard::finite(q, p, "state", step, t)?;
     } else if let Some(z) = show {
         let StackN { a, piv, band, ws } = n;
         z.q.as_mut_slice().copy_from_slice(q);

@@ -6,9 +6,9 @@
 //! observer, no diagnostics, one substep a step, the fast paths and fixed
 //! sizes on).
 //!
-//! The driver's loop reaches the substep through five calls (the step's
-//! composition, the integrator, the substep map, the system's hook, the
-//! fixed-size step) and stores a state through a sixth that copies it,
+//! The driver's loop reaches the substep through six calls (the step's
+//! composition, the integrator, the substep map and its classical step,
+//! the system's hook, the fixed-size step) and stores a state through a seventh that copies it,
 //! and the state goes through memory between steps. For the pendulum the
 //! layers and the record were a third of a run step's instructions, and
 //! the state's trip through memory a sixth of its time (the state in
@@ -35,7 +35,8 @@ use crate::trajectory::Trajectory;
 
 /// A run's steps for the fixed-size substep to take in one call
 /// (`Substep::lane`): steps `first..=last` of size h from the state in the
-/// substep's (q, p), storing every `stride`-th and the last.
+/// substep's (q, p), showing (and, with `store`, storing) every
+/// `stride`-th state and the last.
 pub(crate) struct Lane<'a> {
     pub(crate) first: u64,
     pub(crate) last: u64,
@@ -55,28 +56,39 @@ pub(crate) struct Lane<'a> {
     /// from it on failure): the driver's `prev` and `rec`.
     pub(crate) prev: (&'a mut [f64], &'a mut [f64]),
     pub(crate) rec: (&'a mut [f64], &'a mut [f64]),
-    /// Out: the last stored step and, when a step failed, that step.
+    /// Out: how the lane ended. The driver reads this, not the hook's
+    /// answer (which a hand-written hook could change).
     pub(crate) end: &'a mut LaneEnd,
 }
 
-/// Where a lane ended (`Lane::end`).
-#[derive(Copy, Clone, Debug, Default)]
-pub(crate) struct LaneEnd {
-    /// Whether the lane ran at all (a hook that answers without it leaves
-    /// the run to the driver).
-    pub(crate) entered: bool,
-    pub(crate) last_recorded: u64,
-    pub(crate) failed_at: u64,
+/// How a lane ended (`Lane::end`).
+#[derive(Clone, Debug, Default)]
+pub(crate) enum LaneEnd {
+    /// Never entered (a hook that answered without the runtime's
+    /// fixed-size step): nothing was done, the driver runs.
+    #[default]
+    NotEntered,
+    /// Every step taken and every state to store stored.
+    Done,
+    /// Step `k` failed with `error`; `last_recorded` is the last stored
+    /// step.
+    Failed {
+        k: u64,
+        last_recorded: u64,
+        error: StepError,
+    },
 }
 
 /// Takes the lane's steps from (`cx.q`, `cx.p`) with `substep` (one
 /// fixed-size classical substep in place on the state given, at step k and
 /// time t, writing Π of its result into the state to show, if any), and
-/// leaves the last state in (`cx.q`, `cx.p`). `Ok` once every step is taken and
-/// every state to store is stored; on the first error at step k, the
-/// error, with `end` saying k and the last stored step, and `prev` and
-/// `rec` as described there.
-#[inline(always)]
+/// leaves the last state in (`cx.q`, `cx.p`). `Ok` once every step is
+/// taken and every state to store is stored ([`LaneEnd::Done`]); on the
+/// first error at step k, the error ([`LaneEnd::Failed`] with k, the last
+/// stored step and the error), and `prev` and `rec` as described there.
+/// Out of line (one copy per system, the substep inlined in it): inlined,
+/// the loop would add its code to every caller of the system's hook.
+#[inline(never)]
 pub(crate) fn run<'a, const D: usize>(
     cx: &mut Substep<'a>,
     lane: Lane<'_>,
@@ -113,10 +125,6 @@ pub(crate) fn run<'a, const D: usize>(
             value: cx.q.len() as f64,
         });
     };
-    *end = LaneEnd {
-        entered: true,
-        ..LaneEnd::default()
-    };
     let mut last_recorded = first - 1;
     // Steps to the next multiple of the stride (a division per step is
     // a visible part of a small system's step).
@@ -137,14 +145,7 @@ pub(crate) fn run<'a, const D: usize>(
         let show = (lazy && on_stride).then_some(&mut *shown);
         info = match substep(cx, (&mut q, &mut p), k, t, show) {
             Ok(info) => info,
-            Err(e) => {
-                *end = LaneEnd {
-                    entered: true,
-                    last_recorded,
-                    failed_at: k,
-                };
-                return Err(e.at(k, t));
-            }
+            Err(e) => return Err(fail(end, k, last_recorded, e.at(k, t))),
         };
         if on_stride {
             to_stride = stride;
@@ -156,12 +157,7 @@ pub(crate) fn run<'a, const D: usize>(
             // checks that before Π): NaN or ∞ is an error at this step,
             // never a stored state. (Π moves p only.)
             if !all_finite(shown.p.as_slice()) {
-                *end = LaneEnd {
-                    entered: true,
-                    last_recorded,
-                    failed_at: k,
-                };
-                return Err(not_finite(shown, k, t));
+                return Err(fail(end, k, last_recorded, not_finite(shown, k, t)));
             }
             observer(k, t, shown);
             if store {
@@ -170,10 +166,21 @@ pub(crate) fn run<'a, const D: usize>(
             last_recorded = k;
         }
     }
-    end.last_recorded = last_recorded;
+    *end = LaneEnd::Done;
     cx.q.copy_from_slice(&q);
     cx.p.copy_from_slice(&p);
     Ok(info)
+}
+
+/// Records the failure of step k in `end` and returns its error.
+#[cold]
+fn fail(end: &mut LaneEnd, k: u64, last_recorded: u64, error: StepError) -> StepError {
+    *end = LaneEnd::Failed {
+        k,
+        last_recorded,
+        error: error.clone(),
+    };
+    error
 }
 
 /// The error of a shown state that is not finite, as the driver's

@@ -530,6 +530,9 @@ pub(crate) fn check_and_project<S: ConstrainedSystem>(
         // Linear in σ: one solve, no second root to jump to.
         project(sys, q, p, ws);
         info.rattle_iterations = 1;
+        // Π can overflow where SHAKE did not (σ = N⁻¹{g, H}): as on the
+        // general path, NaN or ∞ is an error at this step.
+        Guard::finite(q, p, "state", step, t)?;
     }
     Ok(info)
 }

@@ -354,7 +354,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         let capacity = if store {
             // (reserved up to 256 MB; a longer run grows the buffer)
             let budget = (1usize << 28) / (16 * integ.system.dof().max(1));
-            usize::try_from(n / stride + 1 + u64::from(n % stride != 0))
+            usize::try_from((n / stride).saturating_add(1 + u64::from(n % stride != 0)))
                 .unwrap_or(usize::MAX)
                 .min(budget)
         } else {
@@ -437,7 +437,9 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 end: &mut end,
             };
             let carry = (integ.compensated && integ.carrying).then_some(integ.carry.as_mut_slice());
-            let taken = integ.steps.map.run_lane(
+            // (What the lane did is read from its own record, not from
+            // the hook's answer: a hand-written hook could change that.)
+            let _ = integ.steps.map.run_lane(
                 &integ.system,
                 &mut integ.guard,
                 &mut q,
@@ -447,21 +449,23 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 carry,
                 lane,
             );
-            match taken {
-                // (A hook that answered without entering the lane, one not
-                // built on the runtime's fixed-size step, leaves the run to
-                // this loop.)
-                _ if !end.entered => {}
-                None => {}
-                Some(Ok(_)) => {
+            match end {
+                // A hook that answered without the runtime's fixed-size
+                // step did nothing: this loop runs.
+                LaneEnd::NotEntered => {}
+                LaneEnd::Done => {
                     return RunOutcome {
                         trajectory: traj,
                         error: None,
                     }
                 }
-                Some(Err(e)) => {
-                    (first, last_recorded) = (end.failed_at, end.last_recorded);
-                    handed = Some(e);
+                LaneEnd::Failed {
+                    k,
+                    last_recorded: last,
+                    error,
+                } => {
+                    (first, last_recorded) = (k, last);
+                    handed = Some(error);
                 }
             }
         }
