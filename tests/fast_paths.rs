@@ -47,36 +47,17 @@ shake::constrained_system! {
     }
 }
 
-/// On the rods of lengths 1 and 0.7, moving.
 fn double_start() -> State {
-    let (t1, t2) = (0.7f64, -0.4f64);
-    let (x1, y1) = (t1.sin(), -t1.cos());
-    let (x2, y2) = (x1 + 0.7 * t2.sin(), y1 - 0.7 * t2.cos());
-    State::from_slices(&[x1, y1, x2, y2], &[0.5, 0.2, -0.3, 0.8])
+    shake_testkit::starts::double_pendulum()
 }
 
 fn pendulum_start() -> State {
     State::from_slices(&[0.8, -0.6], &[0.9, 1.2])
 }
 
+/// A chain of 8 links at varied angles, moving.
 fn chain_start() -> State {
-    let (mut q, mut p) = (vec![0.0; 16], vec![0.0; 16]);
-    let (mut x, mut y, mut vx, mut vy) = (0.0, 0.0, 0.0, 0.0);
-    for k in 0..8 {
-        let (th, om) = (
-            0.3 + 0.7 * (1.3 * k as f64).sin(),
-            0.5 * (0.9 * k as f64).cos(),
-        );
-        x += th.sin();
-        y -= th.cos();
-        vx += om * th.cos();
-        vy += om * th.sin();
-        q[2 * k] = x;
-        q[2 * k + 1] = y;
-        p[2 * k] = vx;
-        p[2 * k + 1] = vy;
-    }
-    State::from_slices(&q, &p)
+    shake_testkit::starts::chain(8)
 }
 
 /// The bands the steps above are factorised in: a chain of 8 links takes

@@ -28,4 +28,5 @@ pub mod models;
 pub mod plot;
 pub mod reference;
 pub mod same_bits;
+pub mod starts;
 pub mod yoshida;
