@@ -28,7 +28,7 @@
 
 use super::fixed::Substep;
 use crate::error::StepError;
-use crate::linalg::all_finite;
+use crate::guard::Guard;
 use crate::state::State;
 use crate::step::StepInfo;
 use crate::trajectory::Trajectory;
@@ -155,9 +155,10 @@ pub(crate) fn run<'a, const D: usize>(
             }
             // Π can overflow where the SHAKE state did not (the guard
             // checks that before Π): NaN or ∞ is an error at this step,
-            // never a stored state. (Π moves p only.)
-            if !all_finite(shown.p.as_slice()) {
-                return Err(fail(end, k, last_recorded, not_finite(shown, k, t)));
+            // never a stored state (the driver's `record` check).
+            let (sq, sp) = (shown.q.as_slice(), shown.p.as_slice());
+            if let Err(e) = Guard::finite(sq, sp, "projected state", k, t) {
+                return Err(fail(end, k, last_recorded, e));
             }
             observer(k, t, shown);
             if store {
@@ -181,19 +182,4 @@ fn fail(end: &mut LaneEnd, k: u64, last_recorded: u64, error: StepError) -> Step
         error: error.clone(),
     };
     error
-}
-
-/// The error of a shown state that is not finite, as the driver's
-/// `record` reports it.
-#[cold]
-#[inline(never)]
-fn not_finite(shown: &State, k: u64, t: f64) -> StepError {
-    match crate::validate::finite("projected state", shown.q.as_slice(), shown.p.as_slice()) {
-        Err(e) => e.at(k, t),
-        // (Unreachable: p is not finite.)
-        Ok(()) => StepError::InvalidInput {
-            what: "projected state",
-            value: f64::NAN,
-        },
-    }
 }
