@@ -288,7 +288,9 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
             if !r.is_finite() || !dq.iter().all(|x| x.is_finite()) {
                 return Err(not_finite(iterations));
             }
-            if r == 0.0 || r.abs() <= floor {
+            // At round-off: the confirming update (`classical::shake_step`).
+            let at_floor = r == 0.0 || r.abs() <= floor;
+            if at_floor && (r == 0.0 || iterations == 0 || iterations >= opts.max_iterations) {
                 break;
             }
             if iterations >= opts.max_iterations {
@@ -315,6 +317,9 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
             (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(lambda));
             if !(step_size.is_finite() && size.is_finite()) {
                 return Err(not_finite(iterations));
+            }
+            if at_floor {
+                break;
             }
             if iterations == 1 && lambda != 0.0 {
                 // The small root of r0 + r1 λ + r2 λ², exact for a distance

@@ -466,7 +466,9 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         if !(r.is_finite() && all_finite(&it.r) && all_finite(&it.dq)) {
             break Err(not_finite(iterations));
         }
-        if r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f) {
+        // At round-off: the confirming update (`classical::shake_step`).
+        let at_floor = r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f);
+        if at_floor && (r == 0.0 || need_jacobian || iterations >= opts.max_iterations) {
             break Ok(());
         }
         if iterations >= opts.max_iterations {
@@ -507,6 +509,9 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &cl.g0, &cl.pattern, Some(&lambda));
         if !(step.is_finite() && size.is_finite()) {
             break Err(not_finite(iterations));
+        }
+        if at_floor {
+            break Ok(());
         }
         if iterations == 1 {
             lambda_noise = step / r_first * norm_inf(&floor);
