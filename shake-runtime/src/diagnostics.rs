@@ -66,7 +66,7 @@ pub(crate) struct Accumulator {
 
 impl Accumulator {
     #[inline]
-    pub(crate) fn add(&mut self, info: &crate::StepInfo) {
+    pub(crate) fn add(&mut self, info: &crate::report::StepInfo) {
         self.shake = self.shake.max(info.shake_iterations);
         self.base = self.base.max(info.base_iterations);
         self.lambda = self.lambda.max(info.lambda);

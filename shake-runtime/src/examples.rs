@@ -162,7 +162,7 @@ impl ConstrainedSystem for Pendulum {
     fn classical_fixed(
         &self,
         cx: crate::classical::fixed::Substep<'_>,
-    ) -> Option<Result<crate::StepInfo, crate::StepError>> {
+    ) -> Option<Result<crate::report::StepInfo, crate::StepError>> {
         crate::classical::fixed::substep::<Self, 2>(self, cx)
     }
 }

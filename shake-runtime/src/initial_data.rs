@@ -27,7 +27,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         Guard::finite(z.q.as_slice(), z.p.as_slice(), "state", 0, 0.0)?;
         validate::options(&self.guard.options)?;
         let tol = self.guard.options.constraint_tolerance;
-        validate::on_constraint(
+        crate::guard::membership::on_constraint(
             &self.system,
             z.q.as_slice(),
             z.p.as_slice(),
@@ -44,7 +44,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             self.guard.newton(),
         )?;
         validate::finite("projected state", q, p)?;
-        validate::on_constraint(&self.system, q, p, &mut self.steps.map.ws, tol)?;
+        crate::guard::membership::on_constraint(&self.system, q, p, &mut self.steps.map.ws, tol)?;
         Ok(out)
     }
 
@@ -91,7 +91,13 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         }
         if self.system.constraint_count() > 0 {
             let tol = self.guard.options.constraint_tolerance;
-            validate::on_constraint(&self.system, q, p, &mut self.steps.map.ws, tol)?;
+            crate::guard::membership::on_constraint(
+                &self.system,
+                q,
+                p,
+                &mut self.steps.map.ws,
+                tol,
+            )?;
             let nd = check_nondegeneracy(&self.system, q, p, &mut self.steps.map.ws);
             if nd.inverse_norm.is_infinite() {
                 return Err(StepError::SingularNondegeneracyMatrix {
@@ -114,7 +120,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     ) -> StepError {
         let tol = self.guard.options.constraint_tolerance;
         let (residual, i, tolerance) = if self.system.constraint_count() > 0 {
-            validate::furthest_off(&self.system, q, p, &mut self.steps.map.ws, tol)
+            crate::guard::membership::furthest_off(&self.system, q, p, &mut self.steps.map.ws, tol)
         } else {
             (0.0, 0, tol)
         };

@@ -27,8 +27,9 @@ use crate::system::ConstrainedSystem;
 use crate::validate;
 
 pub use crate::guard::Options;
+pub use crate::report::StepInfo;
 pub use crate::run::{Run, RunOutcome, StepEvent, StepObserver, Stop};
-pub use crate::step::{Method, StepInfo};
+pub use crate::step::Method;
 pub use crate::trajectory::Trajectory;
 
 /// Geometric SHAKE or RATTLE for a system `S` over a base map `B` with step

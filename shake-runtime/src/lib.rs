@@ -101,12 +101,14 @@ pub mod particles;
 #[cfg(feature = "progress")]
 pub mod progress;
 pub mod rattle;
+pub mod report;
 pub mod run;
 mod shake;
 pub mod solver;
 mod state;
 pub mod step;
 pub mod system;
+mod tolerance;
 mod trajectory;
 mod unconstrained;
 pub mod validate;

@@ -174,7 +174,7 @@ pub(crate) fn g_at_roundoff<S: ConstrainedSystem>(
 ) -> bool {
     sys.constraints(q, p, &mut ws.g);
     sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-    crate::validate::g_within_roundoff(&ws.g, &ws.pattern, &ws.g_z_1, (q, p), 64.0, &mut ws.g_size)
+    crate::tolerance::g_within_roundoff(&ws.g, &ws.pattern, &ws.g_z_1, (q, p), 64.0, &mut ws.g_size)
 }
 
 /// Brings (q, p) onto M = {g = 0} by Gauss–Newton with the minimum-norm

@@ -248,7 +248,7 @@ pub trait ConstrainedSystem: Hamiltonian {
     fn classical_fixed(
         &self,
         cx: crate::classical::fixed::Substep<'_>,
-    ) -> Option<Result<crate::step::StepInfo, crate::error::StepError>> {
+    ) -> Option<Result<crate::report::StepInfo, crate::error::StepError>> {
         let _ = cx;
         None
     }

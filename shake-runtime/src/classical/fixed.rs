@@ -28,9 +28,9 @@ use crate::error::{SolveError, Stage, StepError};
 use crate::guard::Guard;
 use crate::newton::NewtonOptions;
 use crate::rattle::NondegeneracyCheck;
+use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
 use crate::state::State;
-use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
 
 /// One substep's arguments, for [`ConstrainedSystem::classical_fixed`]:
@@ -420,8 +420,8 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     // its condition estimate 1/|N|.
     let guard = &mut *cx.guard;
     let scales = (
-        crate::guard::max_abs(&q, &[]),
-        crate::guard::max_abs(&[], &p),
+        crate::tolerance::max_abs(&q, &[]),
+        crate::tolerance::max_abs(&[], &p),
     );
     let size = g0.iter().map(|x| x.abs()).sum::<f64>();
     guard.on_m(

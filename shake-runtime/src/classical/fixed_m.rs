@@ -26,17 +26,18 @@ use super::fixed::Substep;
 use super::{packed_jacobian, Buffers};
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::guard::{max_abs, Guard};
+use crate::guard::Guard;
 use crate::linalg::{
     all_finite, band_lu_factor, band_lu_solve, dense_lu_factor, dense_lu_solve,
     full_band_lu_factor, full_band_lu_solve, lu_det, norm_inf, Band,
 };
 use crate::newton::NewtonOptions;
 use crate::rattle::{estimate_inverse, FactorN, NondegeneracyCheck};
+use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
 use crate::state::State;
-use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
+use crate::tolerance::max_abs;
 
 /// One classical substep for d = `D` and m = `M` (module docs): SHAKE on
 /// the stack, then the slice path's checks and Π; or the steps of a run's

@@ -29,8 +29,8 @@
 use super::fixed::Substep;
 use crate::error::StepError;
 use crate::guard::Guard;
+use crate::report::StepInfo;
 use crate::state::State;
-use crate::step::StepInfo;
 use crate::trajectory::Trajectory;
 
 /// A run's steps for the fixed-size substep to take in one call

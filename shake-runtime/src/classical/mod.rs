@@ -75,8 +75,8 @@ use crate::error::{SolveError, Stage, StepError};
 use crate::guard::Guard;
 use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf, zero_short};
 use crate::newton::NewtonOptions;
+use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
-use crate::step::StepInfo;
 use crate::system::{ConstrainedSystem, ConstraintKind};
 
 /// The kick fractions (a, b) of the base map when the classical path

@@ -24,15 +24,17 @@
 //! at the start of the run and det N at the previous state.
 
 use crate::error::{SolveError, Stage, StepError};
-use crate::linalg::{all_finite, norm_inf};
+use crate::linalg::all_finite;
 use crate::newton::NewtonOptions;
 use crate::rattle::{
     check_nondegeneracy, factor_and_check, read_n, FactorN, NondegeneracyCheck, ProjectionReport,
 };
+use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
-use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
+use crate::tolerance::max_abs;
 
+pub(crate) mod membership;
 mod options;
 
 pub use options::Options;
@@ -101,7 +103,7 @@ impl Guard {
             return Ok(());
         }
         if let Some(e) =
-            crate::validate::off_constraint(sys, q, p, ws, self.options.constraint_tolerance)
+            membership::off_constraint(sys, q, p, ws, self.options.constraint_tolerance)
         {
             return Err(e.at(step, t));
         }
@@ -299,7 +301,7 @@ impl Guard {
     }
 
     /// The new state is on M to round-off: every |g_i| within
-    /// `validate::step_bound`, max(64ε, Newton's step tolerance) · s_i ·
+    /// `tolerance::step_bound`, max(64ε, Newton's step tolerance) · s_i ·
     /// scale, from `sizes[i]` = ‖∂g_i/∂z‖₁ measured in the step and the
     /// scale (‖q‖∞, ‖p‖∞) of the variables g_i reads at the new state (NaN
     /// is never within). A residual above it means SHAKE's Newton stopped
@@ -321,15 +323,15 @@ impl Guard {
         let tol = self.options.newton.step_tolerance;
         let (qmax, pmax) = scales;
         let within = g.iter().zip(sizes).zip(reads).all(|((gi, si), &r)| {
-            let scale = crate::validate::variable_scale(r, qmax, pmax);
-            gi.abs() <= crate::validate::step_bound(tol, *si, scale)
+            let scale = crate::tolerance::variable_scale(r, qmax, pmax);
+            gi.abs() <= crate::tolerance::step_bound(tol, *si, scale)
         });
         if within {
             return Ok(());
         }
         let (residual, _, bound) =
-            crate::validate::worst_constraint_by(g, sizes, reads, scales, |s, scale| {
-                crate::validate::step_bound(tol, s, scale)
+            crate::tolerance::worst_constraint_by(g, sizes, reads, scales, |s, scale| {
+                crate::tolerance::step_bound(tol, s, scale)
             });
         if !(residual <= bound) {
             return Err(StepError::NewtonNotConverged {
@@ -413,7 +415,7 @@ impl Guard {
             // step (`after_shake`).
             sys.constraints(q, p, &mut ws.g);
             sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-            crate::validate::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
+            crate::tolerance::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
             let scales = (max_abs(q, &[]), max_abs(&[], p));
             self.on_m(
                 Stage::Rattle,
@@ -480,25 +482,4 @@ impl Guard {
     pub(crate) fn newton(&self) -> &NewtonOptions {
         &self.options.newton
     }
-}
-
-/// ‖(q, p)‖∞, NaN-propagating.
-#[inline]
-pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
-    if q.len() + p.len() <= 8 {
-        // (A few entries: one pass, no lanes to set up.)
-        let mut m = 0.0f64;
-        for x in q.iter().chain(p) {
-            if x.is_nan() {
-                return f64::NAN;
-            }
-            m = m.max(x.abs());
-        }
-        return m;
-    }
-    let nan = q.iter().chain(p).fold(false, |n, x| n | x.is_nan());
-    if nan {
-        return f64::NAN;
-    }
-    norm_inf(q).max(norm_inf(p))
 }

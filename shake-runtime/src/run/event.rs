@@ -2,7 +2,7 @@
 
 use std::ops::ControlFlow;
 
-use crate::step::StepInfo;
+use crate::report::StepInfo;
 
 /// An observer of every step: `ControlFlow::Break(())` ends the run.
 pub type StepObserver<'a> = dyn FnMut(&StepEvent) -> ControlFlow<()> + 'a;

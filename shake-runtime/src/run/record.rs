@@ -164,12 +164,13 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         };
         // NaN or ∞ (a parameter that overflows the projection) is an error
         // at this step, never a stored state.
-        crate::validate::finite(
-            "projected state",
+        crate::guard::Guard::finite(
             scratch.q.as_slice(),
             scratch.p.as_slice(),
-        )
-        .map_err(|e| e.at(k, t))?;
+            "projected state",
+            k,
+            t,
+        )?;
         if self.diagnostics {
             let (sq, sp) = (scratch.q.as_slice(), scratch.p.as_slice());
             let (mut constraint, mut hidden) = (0.0, 0.0);

@@ -264,7 +264,7 @@ fn residual_at_roundoff<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> bo
     let d = ws.d;
     let (q, p) = ws.z1.split_at(d);
     sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-    crate::validate::g_within_roundoff(&ws.g, &ws.pattern, &ws.g_z_1, (q, p), 16.0, &mut ws.g_size)
+    crate::tolerance::g_within_roundoff(&ws.g, &ws.pattern, &ws.g_z_1, (q, p), 16.0, &mut ws.g_size)
 }
 
 /// Keeps (`save`) or brings back SHAKE's iterate: λ, z1⁻, Δ and g.

@@ -64,7 +64,7 @@ pub(crate) struct Workspace {
     /// SHAKE's iterate (λ, z1⁻, Δ, g) before an extra iteration at the
     /// noise floor, to go back to when that iteration does not lower g.
     pub(crate) polish_keep: Vec<f64>,
-    /// Which half of z each g_i reads (`validate::reads`).
+    /// Which half of z each g_i reads (`tolerance::reads`).
     pub(crate) g_reads: Vec<u8>,
 }
 
@@ -168,7 +168,7 @@ impl Workspace {
             classical: crate::classical::Buffers::new(sys, jac_band, groups),
             g_size: vec![0.0; m],
             polish_keep: vec![0.0; 2 * m + 2 * n],
-            g_reads: crate::validate::reads(sys.jacobian_pattern(), d, m),
+            g_reads: crate::tolerance::reads(sys.jacobian_pattern(), d, m),
         }
     }
 }

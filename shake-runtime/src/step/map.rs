@@ -14,9 +14,9 @@ use crate::base_map::BaseMap;
 use crate::error::StepError;
 use crate::guard::Guard;
 use crate::rattle::project_hidden;
+use crate::report::StepInfo;
 use crate::shake::{shake_step, Workspace};
 use crate::state::State;
-use crate::step::StepInfo;
 use crate::system::ConstrainedSystem;
 
 /// SHAKE (and Π) over the base map `B`, with its own workspaces.
@@ -125,7 +125,7 @@ impl<B: BaseMap> StepMap<B> {
         // measured at the new state.)
         sys.constraints(q, p, &mut self.ws.g);
         sys.constraint_jacobian(q, p, &mut self.ws.g_z_1);
-        crate::validate::gradient_sizes(&self.ws.pattern, &self.ws.g_z_1, &mut self.ws.g_size);
+        crate::tolerance::gradient_sizes(&self.ws.pattern, &self.ws.g_z_1, &mut self.ws.g_size);
         guard.after_shake(
             sys,
             q,

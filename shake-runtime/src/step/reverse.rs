@@ -31,10 +31,11 @@
 use crate::base_map::BaseMap;
 use crate::composition::Composition;
 use crate::error::StepError;
-use crate::guard::{max_abs, Guard};
+use crate::guard::Guard;
 use crate::rattle::project_hidden;
 use crate::step::{Composed, StepMap};
 use crate::system::ConstrainedSystem;
+use crate::tolerance::max_abs;
 
 /// The step back: its own substep map and the two states.
 #[derive(Clone, Debug)]
@@ -88,7 +89,7 @@ impl<B: BaseMap> Composed<B> {
         let ws = &mut rev.map.ws;
         sys.constraints(q, p, &mut ws.g);
         sys.constraint_jacobian(q, p, &mut ws.g_z_1);
-        crate::validate::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
+        crate::tolerance::gradient_sizes(&ws.pattern, &ws.g_z_1, &mut ws.g_size);
         rev.start_off =
             ws.g.iter()
                 .zip(&ws.g_size)

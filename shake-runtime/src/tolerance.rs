@@ -1,0 +1,169 @@
+//! The scales against which a constraint residual is judged: what
+//! rounding the state in its last bit changes g_i by (its round-off), and
+//! the bounds the constraint tolerance and Newton's tolerance put on |g_i|,
+//! relative to g_i's own size ‖∂g_i/∂z‖₁ and to the size of the variables
+//! it reads. Pure arithmetic on numbers and patterns, used by the kernels,
+//! the guard and the API checks alike.
+
+use crate::linalg::norm_inf;
+
+/// ‖∂g_i/∂z‖₁ for each i, from g_z (m × 2d, column-major) over the
+/// system's pattern of structurally nonzero entries.
+pub(crate) fn gradient_sizes(pattern: &[(usize, usize)], g_z: &[f64], out: &mut [f64]) {
+    let m = out.len();
+    out.fill(0.0);
+    for &(i, k) in pattern {
+        if let Some(v) = g_z.get(i + k * m).filter(|_| i < m) {
+            out[i] += v.abs();
+        }
+    }
+}
+
+/// Which half of z each g_i reads, from the pattern: bit 1 for q, bit 2
+/// for p.
+pub(crate) fn reads(pattern: &[(usize, usize)], d: usize, m: usize) -> Vec<u8> {
+    let mut kind = vec![0u8; m];
+    for &(i, k) in pattern {
+        if i < m {
+            kind[i] |= if k < d { 1 } else { 2 };
+        }
+    }
+    kind
+}
+
+/// The scale of the variables g_i reads: ‖q‖∞ for a g_i of q alone, ‖p‖∞
+/// for one of p alone, ‖z‖∞ otherwise. (Positions and momenta carry
+/// different units; a holonomic g is measured against the positions only,
+/// so that huge momenta cannot make a state far off M look close.)
+#[inline]
+pub(crate) fn variable_scale(reads: u8, qmax: f64, pmax: f64) -> f64 {
+    match reads {
+        1 => qmax,
+        2 => pmax,
+        _ => {
+            if qmax.is_nan() || pmax.is_nan() {
+                f64::NAN
+            } else {
+                qmax.max(pmax)
+            }
+        }
+    }
+}
+
+/// The bound the constraint tolerance puts on |g_i| (see
+/// [`Options::constraint_tolerance`]), from s = ‖∂g_i/∂z‖₁ and the scale
+/// of the variables g_i reads ([`variable_scale`]):
+///
+/// tolerance · (s/2)² + 64 ε · s · scale.
+///
+/// The first term is relative to g_i's own size, in a way that neither a
+/// change of units nor a shift of the origin moves: for a distance
+/// constraint |q_a − q_b|² − ℓ², (s/2)² lies between ℓ² and 2ℓ², so 1e-8
+/// allows the length to be off by about 5e-9 ℓ. The second is the
+/// round-off of g at z, what rounding each variable in its last bit
+/// changes g_i by (with room for the roundings that computed z): a system
+/// far from its origin cannot place its points closer than that.
+#[inline]
+pub(crate) fn constraint_bound(tolerance: f64, size: f64, scale: f64) -> f64 {
+    let half = 0.5 * size;
+    tolerance * half * half + 64.0 * f64::EPSILON * size * scale
+}
+
+/// Whether every |g_i| is within `multiple` · ε Σ_k |∂g_i/∂z_k| |z_k|:
+/// what rounding each entry of z = (q, p) in its last bit changes g_i by.
+/// The sum runs over the Jacobian's pattern; `floor` (length m) receives
+/// Σ_k |∂g_i/∂z_k| |z_k|.
+pub(crate) fn g_within_roundoff(
+    g: &[f64],
+    pattern: &[(usize, usize)],
+    g_z: &[f64],
+    (q, p): (&[f64], &[f64]),
+    multiple: f64,
+    floor: &mut [f64],
+) -> bool {
+    let (d, m) = (q.len(), g.len());
+    floor.fill(0.0);
+    for &(i, k) in pattern {
+        if i < m && k < 2 * d {
+            let zk = if k < d { q[k] } else { p[k - d] };
+            floor[i] += (g_z[i + k * m] * zk).abs();
+        }
+    }
+    g.iter()
+        .zip(floor.iter())
+        .all(|(g, f)| g.abs() <= multiple * f64::EPSILON * f)
+}
+
+/// The bound on |g_i| at the result of a step: its round-off,
+/// max(64ε, `newton_tolerance`) · s · scale, s = ‖∂g_i/∂z‖₁ and the scale
+/// of the variables g_i reads. A step solves g = 0 by Newton: the
+/// residual it leaves is the rounding of g's terms at the new state
+/// (ε·Σ_k |∂g_i/∂z_k| |z_k| ≤ ε·s·scale, with room for the rounding of
+/// the state itself and of the base map's stages), or what a Newton
+/// tolerance looser than round-off allows. Unlike the constraint
+/// tolerance, this does not depend on how far from M the run's initial
+/// data was allowed to be.
+pub(crate) fn step_bound(newton_tolerance: f64, size: f64, scale: f64) -> f64 {
+    (64.0 * f64::EPSILON).max(newton_tolerance) * size * scale
+}
+
+/// The constraint whose |g_i| exceeds its [`constraint_bound`] by the
+/// largest factor, as (|g_i|, i, that bound) (NaN the largest); the state
+/// is on M when |g_i| is within its bound.
+pub(crate) fn worst_constraint(
+    g: &[f64],
+    sizes: &[f64],
+    reads: &[u8],
+    scales: (f64, f64),
+    tolerance: f64,
+) -> (f64, usize, f64) {
+    worst_constraint_by(g, sizes, reads, scales, |s, scale| {
+        constraint_bound(tolerance, s, scale)
+    })
+}
+
+/// [`worst_constraint`] against any bound(s, scale).
+pub(crate) fn worst_constraint_by(
+    g: &[f64],
+    sizes: &[f64],
+    reads: &[u8],
+    (qmax, pmax): (f64, f64),
+    bound_of: impl Fn(f64, f64) -> f64,
+) -> (f64, usize, f64) {
+    let mut worst = (0.0, 0, 0.0);
+    let mut worst_ratio = f64::NEG_INFINITY;
+    for (i, gi) in g.iter().enumerate() {
+        let bound = bound_of(sizes[i], variable_scale(reads[i], qmax, pmax));
+        let r = gi.abs();
+        let ratio = match r / bound {
+            x if x.is_nan() => f64::INFINITY,
+            x => x,
+        };
+        if ratio > worst_ratio {
+            worst = (r, i, bound);
+            worst_ratio = ratio;
+        }
+    }
+    worst
+}
+
+/// ‖(q, p)‖∞, NaN-propagating.
+#[inline]
+pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
+    if q.len() + p.len() <= 8 {
+        // (A few entries: one pass, no lanes to set up.)
+        let mut m = 0.0f64;
+        for x in q.iter().chain(p) {
+            if x.is_nan() {
+                return f64::NAN;
+            }
+            m = m.max(x.abs());
+        }
+        return m;
+    }
+    let nan = q.iter().chain(p).fold(false, |n, x| n | x.is_nan());
+    if nan {
+        return f64::NAN;
+    }
+    norm_inf(q).max(norm_inf(p))
+}
