@@ -55,24 +55,6 @@ const LAYERS: &[(&str, u8)] = &[
 /// `--nocapture` print today's). Each step of docs/engine.md 4.5 deletes its
 /// entries; an entry that no longer occurs fails the test.
 const ALLOW: &[(&str, &str)] = &[
-    // validate.rs (7): tolerance maths → tolerance.rs, membership checks →
-    // guard, `Options::validate` → guard/options.rs, `time` → run/ (step 2).
-    ("guard/mod.rs", "validate.rs"),  // 104, 324, 325, 331, 332, 416
-    ("rattle.rs", "validate.rs"),     // 177
-    ("run/mod.rs", "validate.rs"),    // 307
-    ("run/record.rs", "validate.rs"), // 167
-    ("shake/mod.rs", "validate.rs"),  // 267
-    ("shake/workspace.rs", "validate.rs"), // 171
-    ("step/map.rs", "validate.rs"),   // 128
-    ("step/reverse.rs", "validate.rs"), // 91
-    // step/mod.rs (5): `StepInfo` → report.rs (step 2).
-    ("classical/fixed.rs", "step/mod.rs"),   // 33
-    ("classical/fixed_m.rs", "step/mod.rs"), // 38
-    ("classical/mod.rs", "step/mod.rs"),     // 79
-    ("diagnostics.rs", "step/mod.rs"),       // 69
-    ("examples.rs", "step/mod.rs"),          // 165
-    ("guard/mod.rs", "step/mod.rs"),         // 33
-    ("system.rs", "step/mod.rs"),            // 251
     // particles: `TopologyError` → error.rs, cluster plans and sizes →
     // graph.rs, dense.rs → linalg/small.rs, `ClusterKernel` (step 3).
     ("particles/cluster/dense.rs", "particles/cluster/mod.rs"), // 5
