@@ -11,10 +11,9 @@
 
 use std::ops::ControlFlow;
 
-use shake::runtime::classical::fixed::Substep;
 use shake::{
-    ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, RunOutcome, State,
-    StepError, StepEvent, StepInfo, Stop, StormerVerlet,
+    ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, RunOutcome,
+    SizeVisitor, State, StepError, StepEvent, Stop, StormerVerlet,
 };
 
 /// How a run is set up: SHAKE, RATTLE projecting only what it shows
@@ -170,7 +169,7 @@ fn failing_runs_end_alike_in_both_loops() {
     assert!(between > 0, "no lazy run failed between stored states");
 }
 
-/// A system's fixed-size step reached through a hook that counts its
+/// A system that offers its sizes to the fixed-size step and counts the
 /// calls (one for a whole run through the lane, one a step through the
 /// driver's loop); optionally, Π's right-hand side {g, H} made infinite
 /// once the first coordinate's height q[1] is above `blow_up` (a Π that
@@ -179,19 +178,17 @@ fn failing_runs_end_alike_in_both_loops() {
 struct Counted<S> {
     sys: S,
     calls: std::sync::Arc<std::sync::atomic::AtomicUsize>,
-    hook: for<'a> fn(&Self, Substep<'a>) -> Option<Result<StepInfo, StepError>>,
+    /// (d, m) offered to the visitor as constants.
+    sizes: (usize, usize),
     blow_up: f64,
 }
 
 impl<S> Counted<S> {
-    fn new(
-        sys: S,
-        hook: for<'a> fn(&Self, Substep<'a>) -> Option<Result<StepInfo, StepError>>,
-    ) -> Self {
+    fn new(sys: S, sizes: (usize, usize)) -> Self {
         Counted {
             sys,
             calls: Default::default(),
-            hook,
+            sizes,
             blow_up: f64::INFINITY,
         }
     }
@@ -264,26 +261,19 @@ impl<S: ConstrainedSystem> ConstrainedSystem for Counted<S> {
     fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
         self.sys.fibre_flow(lambda, q, p)
     }
-    fn classical_fixed(&self, cx: Substep<'_>) -> Option<Result<StepInfo, StepError>> {
+    fn with_sizes<V: SizeVisitor<Self>>(&self, v: V) -> V::Output {
         self.calls
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        (self.hook)(self, cx)
+        match self.sizes {
+            (2, 1) => v.fixed::<2, 1>(self),
+            (4, 2) => v.fixed::<4, 2>(self),
+            _ => v.dynamic(self),
+        }
     }
 }
 
 type Pendulum = shake::models::Pendulum;
 type Double = shake::models::DoublePendulum;
-
-fn pendulum_hook<'a>(
-    s: &Counted<Pendulum>,
-    cx: Substep<'a>,
-) -> Option<Result<StepInfo, StepError>> {
-    shake::runtime::classical::fixed::substep::<Counted<Pendulum>, 2>(s, cx)
-}
-
-fn double_hook<'a>(s: &Counted<Double>, cx: Substep<'a>) -> Option<Result<StepInfo, StepError>> {
-    shake::runtime::classical::fixed_m::substep::<Counted<Double>, 4, 2>(s, cx)
-}
 
 #[test]
 fn a_run_takes_the_lane_unless_every_step_is_watched() {
@@ -293,8 +283,8 @@ fn a_run_takes_the_lane_unless_every_step_is_watched() {
         store: true,
         compensated: true,
     };
-    let pendulum = Counted::new(Pendulum::new(1.0, 9.81), pendulum_hook);
-    let double = Counted::new(Double::new(1.0, 0.7, 9.81), double_hook);
+    let pendulum = Counted::new(Pendulum::new(1.0, 9.81), (2, 1));
+    let double = Counted::new(Double::new(1.0, 0.7, 9.81), (4, 2));
     for watched in [false, true] {
         let (out, _) = run(&pendulum, &pendulum_start(), 0.01, 40, s, watched);
         assert!(out.error.is_none());
@@ -318,7 +308,7 @@ fn a_run_takes_the_lane_unless_every_step_is_watched() {
 /// every step (where Π follows the step's own finiteness check).
 #[test]
 fn an_overflowing_projection_ends_both_loops_alike() {
-    let mut sys = Counted::new(Pendulum::new(1.0, 9.81), pendulum_hook);
+    let mut sys = Counted::new(Pendulum::new(1.0, 9.81), (2, 1));
     // The bob rises from q[1] = −0.6: a few steps in.
     sys.blow_up = -0.55;
     for method in ["lazy", "every"] {

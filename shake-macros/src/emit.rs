@@ -294,28 +294,21 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
         Kind::Quadratic | Kind::General => quote!(),
     };
 
-    // The classical step on stack arrays of the system's size (the
-    // runtime's `classical::fixed` for one constraint, `fixed_m` for two
-    // to eight): it needs d and m as constants, which only the macro knows.
+    // d and m as constants for the runtime's fixed-size classical step
+    // (stack arrays of the system's size), offered where the runtime has
+    // one: holonomic g, separable H with quadratic T, one to eight
+    // constraints. Elsewhere the default (`dynamic`) stands, and no
+    // fixed-size code is instantiated for the system.
     let classical = der.kind == Kind::Holonomic && separable && quadratic_kinetic;
-    let step = match m {
-        1 => Some(quote!(::shake::runtime::classical::fixed::substep::<Self, #d>(self, cx))),
-        2..=8 => {
-            Some(quote!(::shake::runtime::classical::fixed_m::substep::<Self, #d, #m>(self, cx)))
-        }
-        _ => None,
-    };
-    let fixed = match step {
-        Some(step) if classical => quote! {
+    let fixed = if classical && (1..=8).contains(&m) {
+        quote! {
             #[inline]
-            fn classical_fixed(
-                &self,
-                cx: ::shake::runtime::classical::fixed::Substep<'_>,
-            ) -> ::core::option::Option<::core::result::Result<::shake::runtime::StepInfo, ::shake::runtime::StepError>> {
-                #step
+            fn with_sizes<V: ::shake::runtime::SizeVisitor<Self>>(&self, v: V) -> V::Output {
+                v.fixed::<#d, #m>(self)
             }
-        },
-        _ => quote!(),
+        }
+    } else {
+        quote!()
     };
 
     quote! {

@@ -187,20 +187,17 @@ fn the_fixed_size_step_is_emitted_for_one_to_eight_constraints() {
         assert!(!out.contains("compile_error"), "{out}");
         out.replace(' ', "")
     };
-    assert!(expand(&chain(1)).contains("classical::fixed::substep::<Self,2usize>"));
-    assert!(expand(&chain(2)).contains("classical::fixed_m::substep::<Self,4usize,2usize>"));
-    assert!(expand(&chain(8)).contains("classical::fixed_m::substep::<Self,16usize,8usize>"));
+    assert!(expand(&chain(1)).contains("v.fixed::<2usize,1usize>(self)"));
+    assert!(expand(&chain(2)).contains("v.fixed::<4usize,2usize>(self)"));
+    assert!(expand(&chain(8)).contains("v.fixed::<16usize,8usize>(self)"));
     let nine = expand(&chain(9));
-    assert!(
-        !nine.contains("fnclassical_fixed"),
-        "m = 9 takes the slice path"
-    );
+    assert!(!nine.contains("fnwith_sizes"), "m = 9 takes the slice path");
     let hopf = expand(
         "pub struct Hopf { dof q[2], p[2]; hamiltonian = (p[0]^2 + p[1]^2) / 2;
          constraints { sphere: q[0]^2 + q[1]^2 + p[0]^2 + p[1]^2 - 1 } }",
     );
     assert!(
-        !hopf.contains("fnclassical_fixed"),
+        !hopf.contains("fnwith_sizes"),
         "g reads p: no classical step"
     );
 }

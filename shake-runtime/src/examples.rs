@@ -159,11 +159,8 @@ impl ConstrainedSystem for Pendulum {
         p[1] -= 2.0 * lambda[0] * q[1];
         ClosedForm::Applied
     }
-    fn classical_fixed(
-        &self,
-        cx: crate::classical::fixed::Substep<'_>,
-    ) -> Option<Result<crate::report::StepInfo, crate::StepError>> {
-        crate::classical::fixed::substep::<Self, 2>(self, cx)
+    fn with_sizes<V: crate::SizeVisitor<Self>>(&self, v: V) -> V::Output {
+        v.fixed::<2, 1>(self)
     }
 }
 

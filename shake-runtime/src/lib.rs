@@ -131,5 +131,5 @@ pub use newton::NewtonOptions;
 /// Re-exported for [`ensemble()`]: its thread pools.
 pub use rayon;
 pub use state::State;
-pub use system::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
+pub use system::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, SizeVisitor};
 pub use unconstrained::Unconstrained;

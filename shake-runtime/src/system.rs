@@ -231,25 +231,51 @@ pub trait ConstrainedSystem: Hamiltonian {
         ClosedForm::Unavailable
     }
 
-    /// One classical substep (holonomic g, separable H with quadratic T,
-    /// a kick–drift–kick base map) on stack arrays of this system's size,
-    /// `crate::classical::fixed::substep::<Self, D>` (m = 1) or
-    /// `crate::classical::fixed_m::substep::<Self, D, M>` (m = 2 to 8):
-    /// `constrained_system!` implements it for those m, since it knows d
-    /// and m at compile time. The same call also takes a run's steps in
-    /// a loop of its own when the run asks it to (`classical::lane`:
-    /// nothing watches every step, so the driver hands it the stride,
-    /// the observer and the trajectory). `None`
-    /// (the default) leaves the step to the runtime's slice path, which
-    /// computes the same map. A wrapper that changes any of the wrapped
-    /// system's functions must not forward this (the step would call the
-    /// wrapped functions, not the wrapper's).
-    #[doc(hidden)]
-    fn classical_fixed(
-        &self,
-        cx: crate::classical::fixed::Substep<'_>,
-    ) -> Option<Result<crate::report::StepInfo, crate::error::StepError>> {
-        let _ = cx;
-        None
+    /// Hands `v` this system's sizes d and m as constants when the system
+    /// knows them at compile time and offers them, else asks it to work
+    /// with run-time sizes ([`SizeVisitor::dynamic`], the default).
+    /// `constrained_system!` offers them to the systems the runtime has
+    /// a fixed-size step for (holonomic g, separable H with quadratic T,
+    /// one to eight constraints), which then step on stack arrays of
+    /// their own size; both give the same map. A wrapper that changes any
+    /// of the wrapped system's functions must not forward this with the
+    /// wrapped system (the visitor would call the wrapped functions, not
+    /// the wrapper's): it may offer its own sizes, `v.fixed::<D, M>(self)`.
+    ///
+    /// ```
+    /// use shake_runtime::{ConstrainedSystem, SizeVisitor, examples::Pendulum};
+    /// struct Sizes;
+    /// impl<S> SizeVisitor<S> for Sizes {
+    ///     type Output = Option<(usize, usize)>;
+    ///     fn fixed<const D: usize, const M: usize>(self, _: &S) -> Self::Output {
+    ///         Some((D, M))
+    ///     }
+    ///     fn dynamic(self, _: &S) -> Self::Output {
+    ///         None
+    ///     }
+    /// }
+    /// assert_eq!(Pendulum::default().with_sizes(Sizes), Some((2, 1)));
+    /// ```
+    #[inline]
+    fn with_sizes<V: SizeVisitor<Self>>(&self, v: V) -> V::Output
+    where
+        Self: Sized,
+    {
+        v.dynamic(self)
     }
+}
+
+/// A computation over a system that can use the system's sizes as
+/// constants (array lengths the compiler knows) when the system has them:
+/// [`ConstrainedSystem::with_sizes`] calls [`fixed`](Self::fixed) with
+/// d = `D` and m = `M`, or [`dynamic`](Self::dynamic). The system trait
+/// names no kernel: the runtime's fixed-size step is one such visitor.
+pub trait SizeVisitor<S: ?Sized> {
+    /// What the computation returns.
+    type Output;
+    /// The computation with d = `D` degrees of freedom and m = `M`
+    /// constraints known at compile time.
+    fn fixed<const D: usize, const M: usize>(self, sys: &S) -> Self::Output;
+    /// The computation with the sizes read at run time.
+    fn dynamic(self, sys: &S) -> Self::Output;
 }

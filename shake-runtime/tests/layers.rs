@@ -62,10 +62,6 @@ const ALLOW: &[(&str, &str)] = &[
     ("particles/global.rs", "particles/options.rs"),            // 8
     ("particles/graph.rs", "particles/cluster/mod.rs"),         // 5
     ("particles/system.rs", "particles/cluster/mod.rs"),        // 3, 167, 270, 291
-    // classical/fixed.rs (3): `classical_fixed(Substep)` → the size
-    // visitor (step 4).
-    ("examples.rs", "classical/fixed.rs"), // 164, 166
-    ("system.rs", "classical/fixed.rs"),   // 250
     // classical/ split: checks and Π → step/, the lane → run/ (step 5).
     ("classical/fixed.rs", "classical/lane.rs"), // 25, 190
     ("classical/fixed.rs", "guard/mod.rs"),      // 28, 423, 424

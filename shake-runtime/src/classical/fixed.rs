@@ -18,9 +18,12 @@
 //! more than a hand-written step of the pendulum (8× its cost); that cost
 //! was the loops over run-time lengths, the copies and the 1×1 "matrices".
 //!
-//! A wrapper around a system (one that changes any of its functions) must
-//! not forward [`ConstrainedSystem::classical_fixed`]: this step would call
-//! the wrapped system's functions, not the wrapper's.
+//! The step reaches a system through [`ConstrainedSystem::with_sizes`]: a
+//! system that offers d and m as constants gets it (`Substep` is a
+//! [`SizeVisitor`](crate::SizeVisitor)). A wrapper around a system (one
+//! that changes any of its functions) must not forward `with_sizes` to the
+//! wrapped system: this step would call the wrapped system's functions,
+//! not the wrapper's.
 
 use super::lane::Lane;
 use crate::compensated::kahan_add;
@@ -33,7 +36,7 @@ use crate::shake::{ShakeReport, Workspace};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
 
-/// One substep's arguments, for [`ConstrainedSystem::classical_fixed`]:
+/// One substep's arguments, the visitor [`ConstrainedSystem::with_sizes`] takes:
 /// the state in place, the step size, the kick fractions of the base map,
 /// whether Π follows, and the integrator's guard, workspace and carry.
 /// Built only by the runtime.
@@ -163,6 +166,25 @@ fn quadratic_root<S: ConstrainedSystem, const D: usize>(
         whw += w[j] * x * w[k];
     }
     super::quadratic_root(h, r0, r1, whw)
+}
+
+/// The fixed-size classical step as a size visitor
+/// ([`ConstrainedSystem::with_sizes`]): m = 1 takes [`substep`], two to
+/// eight constraints `fixed_m::substep`; `None` (run-time sizes, or a
+/// state whose length is not `D`) leaves the step to the slice path.
+impl<S: ConstrainedSystem> crate::system::SizeVisitor<S> for Substep<'_> {
+    type Output = Option<Result<StepInfo, StepError>>;
+    #[inline]
+    fn fixed<const D: usize, const M: usize>(self, sys: &S) -> Self::Output {
+        match M {
+            1 => substep::<S, D>(sys, self),
+            _ => super::fixed_m::substep::<S, D, M>(sys, self),
+        }
+    }
+    #[inline]
+    fn dynamic(self, _: &S) -> Self::Output {
+        None
+    }
 }
 
 /// One classical substep for m = 1 and d = `D` (module docs): SHAKE, the

@@ -20,7 +20,7 @@
 //! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
 //!
 //! A wrapper around a system must not forward
-//! [`ConstrainedSystem::classical_fixed`] (see `classical::fixed`).
+//! [`ConstrainedSystem::with_sizes`] to it (see `classical::fixed`).
 
 use super::fixed::Substep;
 use super::{packed_jacobian, Buffers};

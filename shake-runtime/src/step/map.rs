@@ -180,7 +180,7 @@ impl<B: BaseMap> StepMap<B> {
             show: None,
             lane: Some(lane),
         };
-        let result = sys.classical_fixed(cx)?;
+        let result = sys.with_sizes(cx)?;
         // As `apply` leaves it after the last substep.
         self.n_fresh = result.is_ok();
         Some(result)
@@ -223,7 +223,7 @@ impl<B: BaseMap> StepMap<B> {
                 show: show.then_some(&mut self.shown),
                 lane: None,
             };
-            if let Some(result) = sys.classical_fixed(cx) {
+            if let Some(result) = sys.with_sizes(cx) {
                 self.n_fresh = result.is_ok();
                 // (A fixed-size substep that succeeds has written Π there.)
                 self.shown_fresh = show && result.is_ok();
