@@ -5,8 +5,8 @@
 
 use super::cluster::ClusterArgs;
 use super::graph::{self, Numbering};
-use super::options::StepReport;
 use super::{ParticleError, ParticleSystem};
+use crate::report::StepReport;
 use crate::solver::SpdSolver;
 
 /// The coupled path (chains, general graphs): one simplified Newton over

@@ -68,13 +68,14 @@ pub mod stencils;
 mod system;
 mod table;
 
+pub use crate::report::StepReport;
 #[doc(hidden)]
 pub use cluster::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
-pub use error::ParticleError;
-pub use options::{Method, Options, SolverChoice, StepReport};
+pub use error::{ParticleError, TopologyError};
+pub use options::{Method, Options, SolverChoice};
 pub use rattle::Rattle;
 pub use run::{RunOutcome, RunSummary};
 pub use state::{ParticleState, Trajectory};
 pub use stencil::Stencil;
 pub use system::{ConstraintFamily, ParticleSystem, PotentialFamily};
-pub use table::{Table, TopologyError};
+pub use table::Table;

@@ -62,21 +62,3 @@ impl Default for Options {
         }
     }
 }
-
-/// What one step (or a projection) measured.
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
-pub struct StepReport {
-    /// Largest relative constraint residual at the end (see
-    /// [`Options::tol`]).
-    pub max_rel_g: f64,
-    /// Largest relative hidden-constraint residual |(G M⁻¹ p)_k| /
-    /// (|∇g_k| · |M⁻¹ p| over member k's particles) after the velocity
-    /// stage (0 for SHAKE, which does not project).
-    pub max_hidden: f64,
-    /// Newton iterations: the largest of one cluster on the cluster path,
-    /// the global count otherwise.
-    pub newton_iterations: usize,
-    /// Newton iterations summed over clusters (the global count on the
-    /// coupled path).
-    pub newton_total: u64,
-}

@@ -6,8 +6,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use super::cluster::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
 use super::global::Global;
 use super::graph::{self, Numbering};
-use super::options::{Method, Options, SolverChoice, StepReport};
+use super::options::{Method, Options, SolverChoice};
 use super::{ParticleError, ParticleState, ParticleSystem};
+use crate::report::StepReport;
 use crate::solver::SpdSolver;
 
 /// Unique stamps tie a state to the caches (forces, N's factor) of the

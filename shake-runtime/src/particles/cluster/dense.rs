@@ -2,7 +2,9 @@
 //! partial pivoting for the nonsymmetric Newton matrix, Cholesky for the
 //! symmetric positive definite N, on stack arrays.
 
-use super::MAX_CLUSTER;
+/// The largest matrix order these solvers take: their pivots and
+/// reciprocal diagonals live on the stack.
+pub(crate) const CAPACITY: usize = 12;
 
 /// LU factorisation with partial pivoting of an n×n row-major matrix, in
 /// place. False when a pivot is zero or not finite.
@@ -71,7 +73,7 @@ pub(super) fn lu_solve(n: usize, a: &[f64], piv: &[usize], dinv: &[f64], b: &mut
 /// positive definite.
 #[inline(always)]
 pub(super) fn cholesky_solve(n: usize, a: &mut [f64], b: &mut [f64]) -> bool {
-    let mut dinv = [0.0; MAX_CLUSTER];
+    let mut dinv = [0.0; CAPACITY];
     for j in 0..n {
         let mut d = a[j * n + j];
         for k in 0..j {

@@ -19,8 +19,9 @@
 
 use super::{Stencil, Table};
 
-/// Largest number of constraints a cluster may have to be solved on its own.
-pub(crate) const MAX_CLUSTER: usize = 12;
+/// Largest number of constraints a cluster may have to be solved on its
+/// own: the order of the small dense solvers' matrices.
+pub(crate) const MAX_CLUSTER: usize = dense::CAPACITY;
 /// Largest number of local coordinates (particles × D) of such a cluster.
 pub(crate) const MAX_CLUSTER_COORDS: usize = 96;
 
