@@ -22,7 +22,7 @@ use crate::composition::Composition;
 use crate::error::StepError;
 use crate::guard::Guard;
 use crate::state::State;
-use crate::step::{Composed, StepMap};
+use crate::step::{Composed, StepMap, Within};
 use crate::system::ConstrainedSystem;
 use crate::validate;
 
@@ -502,5 +502,30 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let mut z1 = z.clone();
         self.step_in_place(&mut z1)?;
         Ok(z1)
+    }
+}
+
+impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
+    /// One step from (q, p), in place (the step map's `Composed::advance`), with this
+    /// integrator's system, guard, h, and (inside a run) Kahan carry.
+    /// `step` is the index of the new state, `t` the time t0 + k·h of the
+    /// state it computes.
+    pub(crate) fn advance(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        project: bool,
+        step: u64,
+        t: f64,
+    ) -> Result<StepInfo, StepError> {
+        let at = Within {
+            carry: (self.compensated && self.carrying).then_some(self.carry.as_mut_slice()),
+            in_run: self.carrying,
+            diagnostics: self.diagnostics,
+            step,
+            t,
+        };
+        self.steps
+            .advance(&self.system, &mut self.guard, self.h, q, p, project, at)
     }
 }

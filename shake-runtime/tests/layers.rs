@@ -69,7 +69,6 @@ const ALLOW: &[(&str, &str)] = &[
     // integrator.rs (7): the driver runs a `Stepper` (step 6).
     ("run/mod.rs", "integrator.rs"),    // 30
     ("run/record.rs", "integrator.rs"), // 8
-    ("step/mod.rs", "integrator.rs"),   // 26
 ];
 
 /// Today's module cycles inside a layer (sorted LAYERS keys). Step 5 of

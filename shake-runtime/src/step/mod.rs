@@ -23,7 +23,6 @@ use crate::base_map::BaseMap;
 use crate::composition::Composition;
 use crate::error::StepError;
 use crate::guard::Guard;
-use crate::integrator::Integrator;
 use crate::report::StepInfo;
 use crate::system::ConstrainedSystem;
 
@@ -138,30 +137,5 @@ impl<B: BaseMap> Composed<B> {
             self.reverse(sys, guard, h, q, p, project, start_on_mh, step, t)?;
         }
         Ok(total)
-    }
-}
-
-impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
-    /// One step from (q, p), in place ([`Composed::advance`]), with this
-    /// integrator's system, guard, h, and (inside a run) Kahan carry.
-    /// `step` is the index of the new state, `t` the time t0 + k·h of the
-    /// state it computes.
-    pub(crate) fn advance(
-        &mut self,
-        q: &mut [f64],
-        p: &mut [f64],
-        project: bool,
-        step: u64,
-        t: f64,
-    ) -> Result<StepInfo, StepError> {
-        let at = Within {
-            carry: (self.compensated && self.carrying).then_some(self.carry.as_mut_slice()),
-            in_run: self.carrying,
-            diagnostics: self.diagnostics,
-            step,
-            t,
-        };
-        self.steps
-            .advance(&self.system, &mut self.guard, self.h, q, p, project, at)
     }
 }
