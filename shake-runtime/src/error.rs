@@ -361,6 +361,16 @@ impl StepError {
         }
     }
 
+    /// `Ok` when `value` is finite, else [`StepError::InvalidInput`]
+    /// naming what it is (an input such as a start time, checked before
+    /// any work).
+    pub(crate) fn finite_input(what: &'static str, value: f64) -> Result<(), StepError> {
+        if value.is_finite() {
+            return Ok(());
+        }
+        Err(StepError::InvalidInput { what, value })
+    }
+
     /// Sets the step index and time: the kernels that solve one equation
     /// (`shake`, `rattle`, the base maps) do not know where in a run they
     /// are, and every caller of them passes the step's own k and t0 + k·h.

@@ -304,7 +304,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         if let Err(e) = integ
             .check_h()
             .and_then(|_| integ.check_dims(&z0))
-            .and_then(|_| finite_time("start time must be finite", t0))
+            .and_then(|_| StepError::finite_input("start time must be finite", t0))
         {
             return fail(traj, e);
         }
@@ -592,12 +592,4 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             error: None,
         }
     }
-}
-
-/// A time (start or stop) must be finite.
-fn finite_time(what: &'static str, t: f64) -> Result<(), StepError> {
-    if !t.is_finite() {
-        return Err(StepError::InvalidInput { what, value: t });
-    }
-    Ok(())
 }
