@@ -549,18 +549,6 @@ pub fn lower_with(def: &SystemDef, factored: bool) -> Result<System, Vec<Error>>
     let mut errors = Vec::new();
     let mut names = Names::default();
     for (i, p) in def.params.iter().enumerate() {
-        let name = p.to_string();
-        if name.chars().any(char::is_uppercase) {
-            errors.push(Error::new(
-                p.span(),
-                format!(
-                    "parameter `{name}` is not snake_case: parameters become fields of the struct and \
-                     arguments of `new`, where a capitalised name draws `non_snake_case` warnings and is \
-                     read as a pattern if a constant of that name is in scope (E0005); write `{}`",
-                    name.to_lowercase()
-                ),
-            ));
-        }
         if let Err(e) = lw.declare(p, Sym::Param(ParamId(i as u32))) {
             errors.push(e);
         }
