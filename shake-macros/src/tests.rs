@@ -550,6 +550,13 @@ fn friendly_errors() {
         (base("px^2 + gravty * y"), "did you mean `gravity`?"),
         (base("pxx^2 + gravity * y"), "did you mean `px`?"),
         (base("px^2 + Gravity * y"), "did you mean `gravity`?"),
+        // Case counts, and a case-only difference is the nearest name.
+        (
+            "struct S { parameters { L, G } dof q[1], p[1]; hamiltonian = p[0]^2 + l * q[0]; }"
+                .to_string(),
+            "unknown symbol `l`: not a parameter, coordinate, momentum, `let`, `const` or bound \
+             index (did you mean `L`?)",
+        ),
         (base("px^2 - cso(x)"), "did you mean `cos`?"),
         (base("px**2"), "write `^` for a power"),
     ];

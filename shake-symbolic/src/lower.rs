@@ -488,20 +488,22 @@ fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// ` (did you mean `x`?)` for the candidate nearest to `name`, if it is
-/// within a third of the name's length in edits (at least one; case
-/// differences count as edits), else "". Ties go to the first in sorted order, so
-/// the message does not depend on hash order.
+/// within a third of the name's length in edits (at least one), else "".
+/// Distances are taken between lower-case spellings, so a name that
+/// differs only in case (`l` for a declared `L`) is the nearest of all,
+/// ahead of any one-letter edit (`l` for `G`). Ties go to the first in
+/// sorted order, so the message does not depend on hash order.
 fn suggestion<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
     let limit = (name.chars().count() / 3).max(1);
+    let lower = name.to_lowercase();
     let mut best: Option<(usize, &str)> = None;
-    for c in candidates {
-        let d = edit_distance(&name.to_lowercase(), &c.to_lowercase())
-            + usize::from(name.to_lowercase() == c.to_lowercase() && name != c);
+    for c in candidates.filter(|&c| c != name) {
+        let d = edit_distance(&lower, &c.to_lowercase());
         let better = match best {
             None => true,
             Some(b) => (d, c) < b,
         };
-        if d <= limit && d > 0 && better {
+        if d <= limit && better {
             best = Some((d, c));
         }
     }
