@@ -24,20 +24,8 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
     let vis = &def.vis;
     let name = &def.name;
     let params = &def.params;
-    // `new`'s arguments are patterns: a capitalised name (refused, but
-    // still emitted by the fallback) would match a constant in scope.
-    let args: Vec<proc_macro2::Ident> = params
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            if p.to_string().chars().any(char::is_uppercase) {
-                quote::format_ident!("arg_{}", i, span = p.span())
-            } else {
-                p.clone()
-            }
-        })
-        .collect();
     let field_docs = field_docs(params, def.defaults.as_deref());
+    let new = constructor(params);
     let default = default_impl(name, def.defaults.as_deref());
     quote! {
         #(#attrs)*
@@ -49,15 +37,42 @@ pub fn struct_items(def: &SystemDef, extra_doc: &str) -> TokenStream {
         }
 
         impl #name {
-            /// Creates the system from its parameters, in declaration order.
-            #[allow(clippy::too_many_arguments)]
-            #[must_use]
-            pub const fn new(#(#args: f64),*) -> Self {
-                Self { #(#params: #args),* }
-            }
+            #new
         }
 
         #default
+    }
+}
+
+/// `pub const fn new(..) -> Self`, the parameters in declaration order.
+///
+/// Parameters are named as in the mathematics (`L`, `G`), but a function's
+/// arguments are patterns: `new(L: f64)` would match a constant `L` in the
+/// user's scope instead of binding it (E0005), and draws `non_snake_case`.
+/// So each argument is the parameter's name behind `__` (`__L`), a name no
+/// user item has, and the doc line names the parameters; the fields keep
+/// the user's names.
+pub fn constructor(params: &[syn::Ident]) -> TokenStream {
+    let args: Vec<syn::Ident> = params
+        .iter()
+        .map(|p| quote::format_ident!("__{}", p, span = p.span()))
+        .collect();
+    let names: Vec<String> = params.iter().map(|p| format!("`{p}`")).collect();
+    let doc = if names.is_empty() {
+        " Creates the system (it has no parameters).".to_string()
+    } else {
+        format!(
+            " Creates the system from its parameters, in declaration order: {}.",
+            names.join(", ")
+        )
+    };
+    quote! {
+        #[doc = #doc]
+        #[allow(non_snake_case, clippy::too_many_arguments, clippy::used_underscore_binding)]
+        #[must_use]
+        pub const fn new(#(#args: f64),*) -> Self {
+            Self { #(#params: #args),* }
+        }
     }
 }
 

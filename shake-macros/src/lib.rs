@@ -300,14 +300,19 @@ use quote::quote;
 /// closed-form fibre flow p ← p − g_q(q)ᵀλ). Only structurally nonzero
 /// entries are computed and written.
 ///
+/// Parameters may be named as in the mathematics, `parameters { L, G }`:
+/// the fields are `L` and `G` (with `non_snake_case` allowed on the
+/// struct), and `new`'s arguments are `__L` and `__G`, so a constant `L` in
+/// the caller's scope cannot turn an argument into a pattern.
+///
 /// # Refusals (compile errors at the user's tokens)
 ///
 /// Unknown symbols and functions (with the nearest declared name),
 /// non-differentiable functions, indices out of range, non-constant
-/// exponents, `**` for a power, capitalised parameter names, declarations
-/// past the limits above, duplicate names, constraints that do not
-/// depend on the state, duplicate or dependent constraints, pairs {g_i,g_j}
-/// that do not vanish on M (coisotropy), and an identically singular N
+/// exponents, `**` for a power, declarations past the limits above,
+/// duplicate names, constraints that do not depend on the state, duplicate
+/// or dependent constraints, pairs {g_i,g_j} that do not vanish on M
+/// (coisotropy), and an identically singular N
 /// (nondegeneracy, the paper's Section 5.2). More constraints than
 /// coordinates (m > d, e.g. a family `link[k in 0..2000]` on `dof q[8]`) is
 /// refused right after lowering, before anything is differentiated: such a

@@ -534,7 +534,7 @@ fn emission_keeps_products_of_sums_factored() {
     assert!(!shown(&canon).contains('('), "{}", shown(&canon));
 }
 
-/// Friendly errors (issue 14): did-you-mean, `**`, capitalised parameters.
+/// Friendly errors: did-you-mean, `**`.
 #[test]
 fn friendly_errors() {
     let base = |h: &str| {
@@ -547,13 +547,15 @@ fn friendly_errors() {
         (base("px^2 + gravty * y"), "did you mean `gravity`?"),
         (base("pxx^2 + gravity * y"), "did you mean `px`?"),
         (base("px^2 + Gravity * y"), "did you mean `gravity`?"),
+        // Case counts, and a case-only difference is the nearest name.
+        (
+            "struct S { parameters { L, G } dof q[1], p[1]; hamiltonian = p[0]^2 + l * q[0]; }"
+                .to_string(),
+            "unknown symbol `l`: not a parameter, coordinate, momentum, `let`, `const` or bound \
+             index (did you mean `L`?)",
+        ),
         (base("px^2 - cso(x)"), "did you mean `cos`?"),
         (base("px**2"), "write `^` for a power"),
-        (
-            "struct S { parameters { L } dof q[1], p[1]; hamiltonian = p[0]^2 + L * q[0]; }"
-                .to_string(),
-            "parameter `L` is not snake_case",
-        ),
     ];
     for (src, msg) in cases {
         let out = crate::expand(src.parse().expect("tokens")).to_string();
@@ -565,4 +567,26 @@ fn friendly_errors() {
         out.contains("unknown symbol") && !out.contains("did you mean"),
         "{out:.300}"
     );
+}
+
+/// Parameters named as in the mathematics are accepted, in the scalar and
+/// the particle form: the fields keep the names, `new`'s arguments do not
+/// (an argument `L` would be a pattern if a constant `L` is in scope).
+/// `tests/capitalised_parameters.rs` compiles and runs such systems.
+#[test]
+fn capitalised_parameters_are_fields_not_arguments() {
+    let cases = [
+        "struct P { parameters { L, G } dof q[2], p[2]; \
+         hamiltonian = (p[0]^2 + p[1]^2) / 2 + G * q[1]; constraints { rod: q[0]^2 + q[1]^2 - L^2 } }",
+        "struct C { parameters { L, G } particles x[2]; \
+         potential { fall[k in bobs(a)]: G * x[a][1] } \
+         constraints { link[k in links(a, b)]: norm2(x[a] - x[b]) - L^2 } }",
+    ];
+    for src in cases {
+        let out = crate::expand(src.parse().expect("tokens")).to_string();
+        assert!(!out.contains("compile_error"), "{out:.400}");
+        assert!(out.contains("pub L : f64"), "{out:.400}");
+        assert!(out.contains("fn new (__L : f64 , __G : f64)"), "{out:.400}");
+        assert!(out.contains("Self { L : __L , G : __G }"), "{out:.400}");
+    }
 }

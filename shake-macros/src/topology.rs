@@ -825,6 +825,7 @@ fn emit_stencil(def: &ParticleDef, fam: &FamilyDecl, low: &Lowered) -> TokenStre
     quote! {
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
         #vis struct #sname {
             #( #[doc = #field_docs] pub #params: f64, )*
         }
@@ -838,7 +839,7 @@ fn emit_stencil(def: &ParticleDef, fam: &FamilyDecl, low: &Lowered) -> TokenStre
 
             #[inline]
             fn value(&self, x: &[f64], c: &[f64]) -> f64 {
-                #[allow(dead_code)]
+                #[allow(dead_code, non_snake_case)]
                 struct Env { #(#all: f64,)* }
                 #[allow(unused_variables, clippy::all, clippy::pedantic, clippy::nursery)]
                 impl Env {
@@ -851,7 +852,7 @@ fn emit_stencil(def: &ParticleDef, fam: &FamilyDecl, low: &Lowered) -> TokenStre
 
             #[inline]
             fn gradient(&self, x: &[f64], c: &[f64], grad: &mut [f64]) -> f64 {
-                #[allow(dead_code)]
+                #[allow(dead_code, non_snake_case)]
                 struct Env { #(#all: f64,)* }
                 #[allow(unused_variables, clippy::all, clippy::pedantic, clippy::nursery)]
                 impl Env {
@@ -881,6 +882,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
     let dim = def.dim;
     let field_docs = crate::emit::field_docs(params, def.defaults.as_deref());
     let default = crate::emit::default_impl(name, def.defaults.as_deref());
+    let new = crate::emit::constructor(params);
     let mut doc = format!(
         "\n\n# Declared system\n\nn particles in R^{dim} (n and the masses are given at run time, \
          to [`{name}::system`]), H = Σ_a |p_a|²/(2 m_a) + the potential families; holonomic \
@@ -979,6 +981,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
         #(#attrs)*
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, PartialEq)]
+        #[allow(non_snake_case)]
         #vis struct #name {
             #( #[doc = #field_docs] pub #params: f64, )*
         }
@@ -988,11 +991,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
             /// The dimension D of each particle's position.
             pub const DIM: usize = #dim;
 
-            /// Creates the system from its parameters, in declaration order.
-            #[must_use]
-            pub const fn new(#(#params: f64),*) -> Self {
-                Self { #(#params),* }
-            }
+            #new
 
             #(#table_fns)*
             #(#stencil_fns)*

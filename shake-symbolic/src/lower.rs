@@ -488,20 +488,22 @@ fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// ` (did you mean `x`?)` for the candidate nearest to `name`, if it is
-/// within a third of the name's length in edits (at least one; case
-/// differences count as edits), else "". Ties go to the first in sorted order, so
-/// the message does not depend on hash order.
+/// within a third of the name's length in edits (at least one), else "".
+/// Distances are taken between lower-case spellings, so a name that
+/// differs only in case (`l` for a declared `L`) is the nearest of all,
+/// ahead of any one-letter edit (`l` for `G`). Ties go to the first in
+/// sorted order, so the message does not depend on hash order.
 fn suggestion<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
     let limit = (name.chars().count() / 3).max(1);
+    let lower = name.to_lowercase();
     let mut best: Option<(usize, &str)> = None;
-    for c in candidates {
-        let d = edit_distance(&name.to_lowercase(), &c.to_lowercase())
-            + usize::from(name.to_lowercase() == c.to_lowercase() && name != c);
+    for c in candidates.filter(|&c| c != name) {
+        let d = edit_distance(&lower, &c.to_lowercase());
         let better = match best {
             None => true,
             Some(b) => (d, c) < b,
         };
-        if d <= limit && d > 0 && better {
+        if d <= limit && better {
             best = Some((d, c));
         }
     }
@@ -549,18 +551,6 @@ pub fn lower_with(def: &SystemDef, factored: bool) -> Result<System, Vec<Error>>
     let mut errors = Vec::new();
     let mut names = Names::default();
     for (i, p) in def.params.iter().enumerate() {
-        let name = p.to_string();
-        if name.chars().any(char::is_uppercase) {
-            errors.push(Error::new(
-                p.span(),
-                format!(
-                    "parameter `{name}` is not snake_case: parameters become fields of the struct and \
-                     arguments of `new`, where a capitalised name draws `non_snake_case` warnings and is \
-                     read as a pattern if a constant of that name is in scope (E0005); write `{}`",
-                    name.to_lowercase()
-                ),
-            ));
-        }
         if let Err(e) = lw.declare(p, Sym::Param(ParamId(i as u32))) {
             errors.push(e);
         }

@@ -29,4 +29,3 @@ pub mod plot;
 pub mod reference;
 pub mod same_bits;
 pub mod starts;
-pub mod yoshida;
