@@ -23,7 +23,7 @@ use crate::base_map::BaseMap;
 use crate::composition::Composition;
 use crate::error::StepError;
 use crate::guard::Guard;
-use crate::report::StepInfo;
+pub use crate::report::StepInfo;
 use crate::system::ConstrainedSystem;
 
 /// Which map a step is: SHAKE S_h (onto M) or RATTLE R_h = Π ∘ S_h (onto M^H).
