@@ -11,7 +11,7 @@
 //! the integrator may take is forced in turn: the fixed-size classical
 //! step (the macro's stack arrays), the classical slice path
 //! (`fixed_size(false)`), the run lane (a one-step run with nothing
-//! watching each step: `classical::lane`), and the general path
+//! watching each step: `run::lane`), and the general path
 //! (`fast_paths(false)`: base map and fibre flow through Newton).
 
 mod common;

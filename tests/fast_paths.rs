@@ -414,7 +414,7 @@ fn a_lazily_projected_run_is_the_general_run() {
 }
 
 /// A system of one constraint declared with `constrained_system!` steps on
-/// stack arrays of its own size (`classical::fixed`); the same classical
+/// stack arrays of its own size (`shake::classical::fixed`); the same classical
 /// step on the workspace's vectors (`fixed_size(false)`) is the reference.
 /// Single steps from the states of a run, whole runs (Kahan's carry, lazy
 /// and per-step projection), and the failure of a step too large to
@@ -496,7 +496,7 @@ fn the_fixed_size_step_is_the_slice_step() {
                 println!("{name}, rattle {rattle}, h {h}: worst / tolerance {worst:.3}");
                 assert!(worst <= 1.0, "{name}, rattle {rattle}, h {h}: {worst}");
             }
-            // Two to eight constraints (`classical::fixed_m`): the
+            // Two to eight constraints (`shake::classical::fixed_m`): the
             // diagonal mass matrix's list of Jacobian terms, and a coupled
             // one's column groups.
             let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);

@@ -75,7 +75,7 @@ enum Sys {
     /// Holonomic, m = 2, d = 4 (gravity).
     Double(f64),
     /// The same declared with `constrained_system!` (gravity): its
-    /// classical steps run on stack arrays (`classical::fixed_m`).
+    /// classical steps run on stack arrays (`shake::classical::fixed_m`).
     DeclaredDouble(f64),
     /// Non-separable H, holonomic (ε, gravity).
     NonSeparable(f64, f64),

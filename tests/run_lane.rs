@@ -1,5 +1,5 @@
 //! A run of a system with a fixed-size classical step loops inside that
-//! step (the runtime's `classical::lane`) when nothing watches every
+//! step (the runtime's `run::lane`) when nothing watches every
 //! step; with an `on_step` observer it takes the driver's own loop, one
 //! step at a time through the integrator. Both loops call the same
 //! substep, so the two runs must agree bit for bit: the stored states,

@@ -65,7 +65,7 @@ fn steps_do_not_allocate() {
         DoublePendulum::default().state(0.5, 1.0, 0.3, -0.2),
     );
     // Declared with the macro: the fixed-size classical steps of one
-    // (`classical::fixed`) and of two to eight constraints (`fixed_m`).
+    // (`shake::classical::fixed`) and of two to eight constraints (`fixed_m`).
     let declared = shake::models::Pendulum::new(1.0, 9.81);
     every_base(
         "declared pendulum",

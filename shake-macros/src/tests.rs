@@ -169,7 +169,7 @@ fn expansion_time() {
 }
 
 /// The fixed-size classical step is emitted where the runtime can use it:
-/// `classical::fixed` for one constraint, `classical::fixed_m` with d and m
+/// `shake::classical::fixed` for one constraint, `shake::classical::fixed_m` with d and m
 /// as constants for two to eight, nothing beyond eight or when the
 /// classical path does not apply (g reads p).
 #[test]

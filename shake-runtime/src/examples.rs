@@ -121,7 +121,7 @@ impl ConstrainedSystem for Pendulum {
         ConstraintKind::Holonomic
     }
     fn quadratic_constraints(&self) -> bool {
-        // |q|² − ℓ²: SHAKE's root in closed form (`classical::fixed`).
+        // |q|² − ℓ²: SHAKE's root in closed form (`shake::classical::fixed`).
         true
     }
     fn jacobian_pattern(&self) -> &[(usize, usize)] {

@@ -77,7 +77,6 @@
 
 pub mod base_map;
 #[doc(hidden)]
-pub mod classical;
 pub mod compensated;
 pub mod composition;
 pub mod diagnostics;

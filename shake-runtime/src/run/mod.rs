@@ -12,11 +12,12 @@
 //! [`guard`](crate::guard)'s. A run of a system with a fixed-size
 //! classical step (one substep a step, fast paths and fixed sizes on),
 //! with no `on_step` observer and no diagnostics, loops inside that step
-//! (`classical::lane`) and comes back here only to end:
+//! (`lane`) and comes back here only to end:
 //! the same steps and stored states, without the layers between this
 //! loop and the substep (`tests/run_lane.rs`).
 
 mod event;
+mod lane;
 mod record;
 
 use std::ops::ControlFlow;
@@ -24,7 +25,6 @@ use std::ops::ControlFlow;
 pub use event::{StepEvent, StepObserver};
 
 use crate::base_map::BaseMap;
-use crate::classical::lane::{Lane, LaneEnd};
 use crate::diagnostics::Accumulator;
 use crate::error::StepError;
 use crate::integrator::Integrator;
@@ -33,6 +33,7 @@ use crate::state::State;
 use crate::step::Method;
 use crate::system::ConstrainedSystem;
 use crate::trajectory::{Names, Trajectory};
+use lane::{Lane, LaneEnd};
 
 /// When a run stops.
 ///
@@ -415,7 +416,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         let (mut rec_q, mut rec_p) = (q.clone(), p.clone());
         // The common case, one fixed-size classical substep a step and
         // nothing to see between stored states, loops inside that step
-        // (`classical::lane`); on an error it hands it over here, at the
+        // (`lane`); on an error it hands it over here, at the
         // step that failed, with what this loop would hold there.
         let mut first = 1;
         let mut handed = None;
@@ -439,7 +440,8 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             let carry = (integ.compensated && integ.carrying).then_some(integ.carry.as_mut_slice());
             // (What the lane did is read from its own record, not from
             // the hook's answer: a hand-written hook could change that.)
-            let _ = integ.steps.map.run_lane(
+            let _ = lane::enter(
+                &mut integ.steps.map,
                 &integ.system,
                 &mut integ.guard,
                 &mut q,

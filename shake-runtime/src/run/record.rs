@@ -99,7 +99,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     fn project_shown(&mut self, z: &mut State, k: u64, t: f64) -> Result<usize, StepError> {
         if self.steps.map.n_fresh && self.steps.map.fast_paths {
             // The classical path: N at this q is factorised and checked.
-            crate::classical::project(
+            crate::shake::classical::project(
                 &self.system,
                 z.q.as_slice(),
                 z.p.as_mut_slice(),
@@ -149,7 +149,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let lazy = self.method == Method::Rattle && !projected;
         let rattle_iterations = if lazy && self.steps.map.shown_fresh {
             // The step that made (q, p) also made its Π (`StepMap::show`),
-            // with the operations of `classical::project`.
+            // with the operations of `shake::classical::project`.
             std::mem::swap(scratch, &mut self.steps.map.shown);
             self.steps.map.shown_fresh = false;
             1

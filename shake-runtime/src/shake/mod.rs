@@ -55,6 +55,7 @@
 //! λ = (h/2) λ_classical of the paper's Section 5.1.3 (h λ_classical for
 //! symplectic Euler).
 
+pub(crate) mod classical;
 mod workspace;
 
 pub(crate) use workspace::Workspace;

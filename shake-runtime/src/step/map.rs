@@ -8,7 +8,7 @@
 //! the general one, a Newton iteration on λ through the base map and the
 //! fibre flow (`crate::shake`), and the classical one for holonomic
 //! constraints, a separable H with constant mass matrix and a
-//! kick–drift–kick base map (`crate::classical`).
+//! kick–drift–kick base map (`crate::shake::classical`).
 
 use crate::base_map::BaseMap;
 use crate::error::StepError;
@@ -32,7 +32,7 @@ pub(crate) struct StepMap<B: BaseMap> {
     pub(crate) classical: Option<(f64, f64)>,
     pub(crate) fast_paths: bool,
     /// Whether the fast classical path may use the system's fixed-size
-    /// step (`classical::fixed`, `classical::fixed_m`) when it has one.
+    /// step (`shake::classical::fixed`, `shake::classical::fixed_m`) when it has one.
     pub(crate) fixed_size: bool,
     /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
     /// (set by the classical step's check and by `Integrator::begin`).
@@ -44,7 +44,7 @@ pub(crate) struct StepMap<B: BaseMap> {
     /// (`run::record`, which otherwise projects a copy itself).
     pub(crate) show: bool,
     /// Π of the last substep's result, valid when `shown_fresh`: the same
-    /// operations on the same numbers as `classical::project`.
+    /// operations on the same numbers as `shake::classical::project`.
     pub(crate) shown: State,
     pub(crate) shown_fresh: bool,
 }
@@ -52,7 +52,7 @@ pub(crate) struct StepMap<B: BaseMap> {
 impl<B: BaseMap> StepMap<B> {
     /// The map for `sys` over `base`, its buffers allocated.
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S, base: B) -> Self {
-        let classical = crate::classical::classical(sys, &base);
+        let classical = crate::shake::classical::classical(sys, &base);
         StepMap {
             ws: Workspace::new(sys, classical.is_some()),
             base_ws: base.workspace(sys.dof()),
@@ -141,51 +141,6 @@ impl<B: BaseMap> StepMap<B> {
         Ok(info)
     }
 
-    /// The steps of `lane` (`classical::lane`) from (q, p), in place, each
-    /// the substep [`apply`](Self::apply) would take (projected if
-    /// `project`), when the system has a fixed-size classical step and the
-    /// fast paths are on. `None`: not taken, no step done (the one-shot
-    /// flags `n_fresh`, `show`, `shown_fresh` are reset, as `apply` resets
-    /// them).
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn run_lane<'a, S: ConstrainedSystem>(
-        &'a mut self,
-        sys: &S,
-        guard: &'a mut Guard,
-        q: &'a mut [f64],
-        p: &'a mut [f64],
-        h: f64,
-        project: bool,
-        carry: Option<&'a mut [f64]>,
-        lane: crate::classical::lane::Lane<'a>,
-    ) -> Option<Result<StepInfo, StepError>> {
-        let kdk = self.classical?;
-        if !(self.fast_paths && self.fixed_size) {
-            return None;
-        }
-        (self.n_fresh, self.show, self.shown_fresh) = (false, false, false);
-        let newton = *guard.newton();
-        let cx = crate::classical::fixed::Substep {
-            q,
-            p,
-            h,
-            kdk,
-            project,
-            step: lane.first,
-            t: lane.t0,
-            newton,
-            guard,
-            ws: &mut self.ws,
-            carry,
-            show: None,
-            lane: Some(lane),
-        };
-        let result = sys.with_sizes(cx)?;
-        // As `apply` leaves it after the last substep.
-        self.n_fresh = result.is_ok();
-        Some(result)
-    }
-
     /// [`apply`](Self::apply) on the classical path (see `classical`):
     /// SHAKE with its own Newton iteration, then one evaluation and
     /// factorisation of N at the new q for the checks and (if `project`)
@@ -208,7 +163,7 @@ impl<B: BaseMap> StepMap<B> {
     ) -> Result<StepInfo, StepError> {
         let newton = *guard.newton();
         if self.fixed_size {
-            let cx = crate::classical::fixed::Substep {
+            let cx = super::classical::Substep {
                 q: &mut *q,
                 p: &mut *p,
                 h,
@@ -221,7 +176,6 @@ impl<B: BaseMap> StepMap<B> {
                 ws: &mut self.ws,
                 carry: carry.as_deref_mut(),
                 show: show.then_some(&mut self.shown),
-                lane: None,
             };
             if let Some(result) = sys.with_sizes(cx) {
                 self.n_fresh = result.is_ok();
@@ -230,9 +184,10 @@ impl<B: BaseMap> StepMap<B> {
                 return result;
             }
         }
-        let report = crate::classical::shake_step(sys, kdk, h, q, p, &mut self.ws, &newton, carry)
-            .map_err(|e| e.at(step, t))?;
-        let info = crate::classical::check_and_project(
+        let report =
+            crate::shake::classical::shake_step(sys, kdk, h, q, p, &mut self.ws, &newton, carry)
+                .map_err(|e| e.at(step, t))?;
+        let info = super::classical::check_and_project(
             sys,
             q,
             p,

@@ -3,7 +3,7 @@
 //! map z ↦ z′ over a base map φ_h.
 //!
 //! - `map`: one substep, SHAKE on the general path (the Newton iteration
-//!   on λ of `crate::shake`) or the classical one (`crate::classical`),
+//!   on λ of `crate::shake`) or the classical one (`crate::shake::classical`),
 //!   followed by Π for RATTLE: `StepMap`, which owns its workspaces;
 //! - `reverse`: the check of a composed step by stepping back with −h;
 //! - this file: `Composed`, the composition of substeps γ_k h that makes
@@ -13,7 +13,8 @@
 //! [`guard`](crate::guard)'s, and the run around it (stride, storage,
 //! observers) is the [`run`](crate::run) driver's.
 
-mod map;
+pub(crate) mod classical;
+pub(crate) mod map;
 mod reverse;
 
 pub(crate) use map::StepMap;

@@ -1,7 +1,7 @@
 //! A run's steps taken inside the fixed-size classical step's own frame:
 //! the loop of [`Run::execute`](crate::Run::execute) for the common case,
 //! where every step is one fixed-size classical substep
-//! ([`fixed`](super::fixed), [`fixed_m`](super::fixed_m)) and a stored
+//! (`step::classical`) and a stored
 //! state needs nothing but its Π, the observer and the push (no `on_step`
 //! observer, no diagnostics, one substep a step, the fast paths and fixed
 //! sizes on).
@@ -26,17 +26,20 @@
 //! ends the run as it ends any run (`tests/run_lane.rs` compares the two
 //! loops state by state, and on failure, trajectory and error).
 
-use super::fixed::Substep;
+use crate::base_map::BaseMap;
 use crate::error::StepError;
 use crate::guard::Guard;
 use crate::report::StepInfo;
 use crate::state::State;
+use crate::step::classical::{fits, fixed_step, Substep};
+use crate::step::map::StepMap;
+use crate::system::{ConstrainedSystem, SizeVisitor};
 use crate::trajectory::Trajectory;
 
-/// A run's steps for the fixed-size substep to take in one call
-/// (`Substep::lane`): steps `first..=last` of size h from the state in the
-/// substep's (q, p), showing (and, with `store`, storing) every
-/// `stride`-th state and the last.
+/// A run's steps for the fixed-size substep to take in one call: steps
+/// `first..=last` of size h from the state in the substep's (q, p),
+/// showing (and, with `store`, storing) every `stride`-th state and the
+/// last.
 pub(crate) struct Lane<'a> {
     pub(crate) first: u64,
     pub(crate) last: u64,
@@ -79,26 +82,87 @@ pub(crate) enum LaneEnd {
     },
 }
 
-/// Takes the lane's steps from (`cx.q`, `cx.p`) with `substep` (one
-/// fixed-size classical substep in place on the state given, at step k and
-/// time t, writing Π of its result into the state to show, if any), and
-/// leaves the last state in (`cx.q`, `cx.p`). `Ok` once every step is
-/// taken and every state to store is stored ([`LaneEnd::Done`]); on the
-/// first error at step k, the error ([`LaneEnd::Failed`] with k, the last
-/// stored step and the error), and `prev` and `rec` as described there.
-/// Out of line (one copy per system, the substep inlined in it): inlined,
-/// the loop would add its code to every caller of the system's hook.
+/// The steps of `lane` from (q, p), in place, each the substep
+/// [`StepMap::apply`] would take (projected if `project`), when the system
+/// has a fixed-size classical step and the fast paths are on. `None`: not
+/// taken, no step done (the one-shot flags `n_fresh`, `show`,
+/// `shown_fresh` are reset, as `apply` resets them).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn enter<'a, S: ConstrainedSystem, B: BaseMap>(
+    map: &'a mut StepMap<B>,
+    sys: &S,
+    guard: &'a mut Guard,
+    q: &'a mut [f64],
+    p: &'a mut [f64],
+    h: f64,
+    project: bool,
+    carry: Option<&'a mut [f64]>,
+    lane: Lane<'a>,
+) -> Option<Result<StepInfo, StepError>> {
+    let kdk = map.classical?;
+    if !(map.fast_paths && map.fixed_size) {
+        return None;
+    }
+    (map.n_fresh, map.show, map.shown_fresh) = (false, false, false);
+    let newton = *guard.newton();
+    let cx = Substep {
+        q,
+        p,
+        h,
+        kdk,
+        project,
+        step: lane.first,
+        t: lane.t0,
+        newton,
+        guard,
+        ws: &mut map.ws,
+        carry,
+        show: None,
+    };
+    let result = sys.with_sizes(LaneVisitor { cx, lane })?;
+    // As `apply` leaves it after the last substep.
+    map.n_fresh = result.is_ok();
+    Some(result)
+}
+
+/// The lane as a size visitor ([`ConstrainedSystem::with_sizes`]): a
+/// system with fixed sizes that [`fits`] gets [`run`] for them; `None`
+/// (nothing done) otherwise.
+struct LaneVisitor<'a> {
+    cx: Substep<'a>,
+    lane: Lane<'a>,
+}
+
+impl<S: ConstrainedSystem> SizeVisitor<S> for LaneVisitor<'_> {
+    type Output = Option<Result<StepInfo, StepError>>;
+    #[inline]
+    fn fixed<const D: usize, const M: usize>(self, sys: &S) -> Self::Output {
+        let LaneVisitor { mut cx, lane } = self;
+        if !fits::<S, D, M>(sys, &cx) {
+            return None;
+        }
+        Some(run::<S, D, M>(sys, &mut cx, lane))
+    }
+    #[inline]
+    fn dynamic(self, _: &S) -> Self::Output {
+        None
+    }
+}
+
+/// Takes the lane's steps from (`cx.q`, `cx.p`), each one fixed-size
+/// classical substep in place ([`fixed_step`], writing Π of its result into
+/// the state to show, if any), and leaves the last state in (`cx.q`,
+/// `cx.p`). `Ok` once every step is taken and every state to store is
+/// stored ([`LaneEnd::Done`]); on the first error at step k, the error
+/// ([`LaneEnd::Failed`] with k, the last stored step and the error), and
+/// `prev` and `rec` as described there. Out of line (one copy per system,
+/// the substep inlined in it): inlined, the loop would add its code to
+/// every caller of the system's hook.
 #[inline(never)]
-pub(crate) fn run<'a, const D: usize>(
-    cx: &mut Substep<'a>,
+fn run<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    cx: &mut Substep<'_>,
     lane: Lane<'_>,
-    mut substep: impl FnMut(
-        &mut Substep<'a>,
-        (&mut [f64; D], &mut [f64; D]),
-        u64,
-        f64,
-        Option<&mut State>,
-    ) -> Result<StepInfo, StepError>,
 ) -> Result<StepInfo, StepError> {
     let Lane {
         first,
@@ -143,7 +207,7 @@ pub(crate) fn run<'a, const D: usize>(
         to_stride -= 1;
         let on_stride = to_stride == 0 || k == last;
         let show = (lazy && on_stride).then_some(&mut *shown);
-        info = match substep(cx, (&mut q, &mut p), k, t, show) {
+        info = match fixed_step::<S, D, M>(sys, cx, (&mut q, &mut p), k, t, show) {
             Ok(info) => info,
             Err(e) => return Err(fail(end, k, last_recorded, e.at(k, t))),
         };

@@ -57,25 +57,21 @@
 //!
 //! A system that knows its d and m at compile time (every
 //! `constrained_system!`) takes the same step on stack arrays: for one
-//! constraint with N and the Jacobian as numbers and its own checks
-//! ([`fixed`]), for two to eight with SHAKE's iteration, N and Π on the
-//! stack, the same operations as `check_and_project` ([`fixed_m`]). The
-//! functions here serve every other classical system.
+//! constraint with N and the Jacobian as numbers ([`fixed`]), for two to
+//! eight with SHAKE's iteration, N and Π on the stack ([`fixed_m`]). The
+//! functions here serve every other classical system. The checks of the
+//! new state are the guard's, in `step::classical`, for all three.
 
-pub mod fixed;
-pub mod fixed_m;
-pub(crate) mod lane;
-mod workspace;
+pub(crate) mod fixed;
+pub(crate) mod fixed_m;
 
-pub(crate) use workspace::{packed_jacobian, Buffers};
+pub(crate) use super::workspace::{packed_jacobian, Buffers};
 
 use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::guard::Guard;
 use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf, zero_short};
 use crate::newton::NewtonOptions;
-use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
 use crate::system::{ConstrainedSystem, ConstraintKind};
 
@@ -496,56 +492,4 @@ pub(crate) fn project<S: ConstrainedSystem>(
         }
     }
     norm_inf(&ws.sigma)
-}
-
-/// The checks of a classical substep's new state (q, p) = z1⁻ (finite, on
-/// M to round-off with g's scale from G0, then the guard's nondegeneracy,
-/// component and fibre-jump checks, one evaluation and factorisation of N
-/// at the new q), and, if `project`, Π: one linear solve with those
-/// factors. The slice path's; the fixed-size steps do the same on the
-/// stack (`fixed_m`, and `fixed` with numbers for one constraint).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn check_and_project<S: ConstrainedSystem>(
-    sys: &S,
-    q: &mut [f64],
-    p: &mut [f64],
-    ws: &mut Workspace,
-    guard: &mut Guard,
-    report: &ShakeReport,
-    project_onto_mh: bool,
-    h: f64,
-    step: u64,
-    t: f64,
-) -> Result<StepInfo, StepError> {
-    let mut info = StepInfo {
-        shake_iterations: report.iterations,
-        lambda: report.lambda,
-        ..StepInfo::default()
-    };
-    Guard::finite(q, p, "state", step, t)?;
-    // g at the new state was the last residual of SHAKE's iteration (the
-    // state is z0 + Δ, rounded once more by the addition); the tolerance's
-    // scale ‖∂g_i/∂z‖₁ is G0's, at the start of the step, which the SHAKE
-    // step left in `ws.g_size`.
-    guard.after_shake(
-        sys,
-        q,
-        p,
-        ws,
-        report,
-        &mut info,
-        project_onto_mh,
-        h,
-        step,
-        t,
-    )?;
-    if project_onto_mh {
-        // Linear in σ: one solve, no second root to jump to.
-        project(sys, q, p, ws);
-        info.rattle_iterations = 1;
-        // Π can overflow where SHAKE did not (σ = N⁻¹{g, H}): as on the
-        // general path, NaN or ∞ is an error at this step.
-        Guard::finite(q, p, "state", step, t)?;
-    }
-    Ok(info)
 }

@@ -1,172 +1,39 @@
-//! The classical SHAKE step of a few constraints (2 ≤ m ≤ 8) on stack
-//! arrays of the system's own sizes: what `constrained_system!` calls when
-//! it can see d and m at compile time.
+//! SHAKE for a few constraints (2 ≤ m ≤ 8) on stack arrays of the
+//! system's own sizes, with N and Π on the stack: the kernel of the
+//! fixed-size classical step (`step::classical`) when `constrained_system!`
+//! can see d and m at compile time.
 //!
-//! The map is the slice path's (`classical::shake_step`), computed with the
-//! same operations in the same order (the same kick, residual, Jacobian
-//! from the same list of terms, the same banded LU kernels, the same
-//! stopping rules), so it gives the same steps to the last bit
-//! (`tests/fast_paths.rs`). What moves to the stack is SHAKE's Newton
-//! iteration (λ, r, q1, Δ and the m×m Jacobian), N with its factors, and
-//! Π's σ: arrays whose lengths the compiler knows, so the loops over them
-//! unroll and the generated derivatives inline with their sizes. The
-//! checks are the guard's, as on the slice path
-//! (`classical::check_and_project`). Both matrices are factorised in their
-//! band, as the slice path does: a chain's are tridiagonal from three
-//! links on (`linalg::tridiagonal`, O(m) with the recursion in
-//! registers). N on the stack (1.90 → 1.83) and the tridiagonal kernels
-//! (→ 1.50–1.53) took a 4-link chain's RATTLE run to about 1.5 times the
-//! hand-written step (BENCHMARKS.md, section 7.5).
+//! The map is the slice path's ([`super::shake_step`], [`super::project`]),
+//! computed with the same operations in the same order (the same kick,
+//! residual, Jacobian from the same list of terms, the same banded LU
+//! kernels, the same stopping rules), so it gives the same steps to the
+//! last bit (`tests/fast_paths.rs`). What moves to the stack is SHAKE's
+//! Newton iteration (λ, r, q1, Δ and the m×m Jacobian), N with its factors,
+//! and Π's σ: arrays whose lengths the compiler knows, so the loops over
+//! them unroll and the generated derivatives inline with their sizes. Both
+//! matrices are factorised in their band, as the slice path does: a
+//! chain's are tridiagonal from three links on (`linalg::tridiagonal`,
+//! O(m) with the recursion in registers). N on the stack (1.90 → 1.83) and
+//! the tridiagonal kernels (→ 1.50–1.53) took a 4-link chain's RATTLE run
+//! to about 1.5 times the hand-written step (BENCHMARKS.md, section 7.5).
 //! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
-//!
-//! A wrapper around a system must not forward
-//! [`ConstrainedSystem::with_sizes`] to it (see `classical::fixed`).
 
-use super::fixed::Substep;
 use super::{packed_jacobian, Buffers};
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::guard::Guard;
 use crate::linalg::{
     all_finite, band_lu_factor, band_lu_solve, dense_lu_factor, dense_lu_solve,
     full_band_lu_factor, full_band_lu_solve, lu_det, norm_inf, Band,
 };
 use crate::newton::NewtonOptions;
 use crate::rattle::{estimate_inverse, FactorN, NondegeneracyCheck};
-use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
-use crate::state::State;
 use crate::system::ConstrainedSystem;
-use crate::tolerance::max_abs;
-
-/// One classical substep for d = `D` and m = `M` (module docs): SHAKE on
-/// the stack, then the slice path's checks and Π; or the steps of a run's
-/// lane (`Substep::lane`, `classical::lane`). `None` when the state's
-/// length is not `D` or the system has not `M` constraints (the caller
-/// takes the slice path).
-#[inline]
-pub fn substep<S: ConstrainedSystem, const D: usize, const M: usize>(
-    sys: &S,
-    mut cx: Substep<'_>,
-) -> Option<Result<StepInfo, StepError>> {
-    if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != M || !(2..=8).contains(&M) {
-        return None;
-    }
-    if let Some(lane) = cx.lane.take() {
-        let one = |cx: &mut Substep<'_>,
-                   (q, p): (&mut [f64; D], &mut [f64; D]),
-                   k,
-                   t,
-                   show: Option<&mut State>| {
-            in_place::<S, D, M>(sys, cx, (q, p), k, t, show)
-        };
-        return Some(super::lane::run(&mut cx, lane, one));
-    }
-    let (step, t, show) = (cx.step, cx.t, cx.show.take());
-    // (The state is lent to `in_place` apart from `cx`, which it does not
-    // read it through.)
-    let (q, p) = (std::mem::take(&mut cx.q), std::mem::take(&mut cx.p));
-    Some(in_place::<S, D, M>(sys, &mut cx, (q, p), step, t, show))
-}
-
-/// The substep in place on (q, p) at step `step`, time `t`, Π of its
-/// result into `show` when given and the substep is not projected.
-#[inline(always)]
-fn in_place<S: ConstrainedSystem, const D: usize, const M: usize>(
-    sys: &S,
-    cx: &mut Substep<'_>,
-    (q, p): (&mut [f64], &mut [f64]),
-    step: u64,
-    t: f64,
-    show: Option<&mut State>,
-) -> Result<StepInfo, StepError> {
-    let carry = cx.carry.as_deref_mut();
-    let report = shake::<S, D, M>(sys, cx.kdk, cx.h, q, p, cx.ws, &cx.newton, carry)
-        .map_err(|e| e.at(step, t))?;
-    check_and_project::<S, D, M>(
-        sys,
-        q,
-        p,
-        cx.ws,
-        cx.guard,
-        &report,
-        (cx.project, show),
-        cx.h,
-        step,
-        t,
-    )
-}
-
-/// `classical::check_and_project` with N on the stack: the same checks
-/// (finite, on M, N's condition, component and fibre jump, through the
-/// guard) and the same Π, computed with the same operations in the same
-/// order (`factor_n`'s kernels: the dense LU for the full band, else the
-/// banded one), so the same bits;
-/// but N, its factors and σ live in arrays whose sizes the compiler knows,
-/// so the loops unroll and nothing is indexed through run-time lengths.
-/// N's factors are left in `ws.jac`/`ws.piv`, as `factor_n` leaves them,
-/// for the lazy Π (`classical::project`) and Hager's estimate. Without
-/// `project`, Π of the new state goes to `show` if given (the same solve).
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn check_and_project<S: ConstrainedSystem, const D: usize, const M: usize>(
-    sys: &S,
-    q: &mut [f64],
-    p: &mut [f64],
-    ws: &mut Workspace,
-    guard: &mut Guard,
-    report: &ShakeReport,
-    (project, show): (bool, Option<&mut State>),
-    h: f64,
-    step: u64,
-    t: f64,
-) -> Result<StepInfo, StepError> {
-    let mut info = StepInfo {
-        shake_iterations: report.iterations,
-        lambda: report.lambda,
-        ..StepInfo::default()
-    };
-    Guard::finite(q, p, "state", step, t)?;
-    let scales = (max_abs(q, &[]), max_abs(&[], p));
-    guard.on_m(
-        Stage::Shake,
-        &ws.g,
-        &ws.g_size,
-        &ws.g_reads,
-        scales,
-        report.iterations,
-        step,
-        t,
-    )?;
-    let q: &[f64; D] = (&*q).try_into().expect("checked by substep");
-    let mut n = StackN::<M> {
-        a: [[0.0; M]; M],
-        piv: [0; M],
-        band: ws.n.band,
-        ws,
-    };
-    sys.nondegeneracy_matrix(q, p, n.a.as_flattened_mut());
-    let (norm, change) = n.read();
-    guard.check_n(&mut n, norm, change, report, &mut info, project, h, step, t)?;
-    if project {
-        let StackN { a, piv, band, ws } = n;
-        project_on_stack::<S, D, M>(sys, q, p, (&a, &piv, band), ws);
-        info.rattle_iterations = 1;
-        // (Π can overflow where SHAKE did not: `classical::check_and_project`.)
-        Guard::finite(q, p, "state", step, t)?;
-    } else if let Some(z) = show {
-        let StackN { a, piv, band, ws } = n;
-        z.q.as_mut_slice().copy_from_slice(q);
-        z.p.as_mut_slice().copy_from_slice(p);
-        project_on_stack::<S, D, M>(sys, q, z.p.as_mut_slice(), (&a, &piv, band), ws);
-    }
-    Ok(info)
-}
 
 /// Π at (q, p), p in place, with N's factors on the stack: one solve
 /// N σ = {g, H}, then the kick along the fibre (σ left in `ws.sigma`).
 #[inline(always)]
-fn project_on_stack<S: ConstrainedSystem, const D: usize, const M: usize>(
+pub(crate) fn project_on_stack<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     q: &[f64; D],
     p: &mut [f64],
@@ -201,11 +68,11 @@ fn project_on_stack<S: ConstrainedSystem, const D: usize, const M: usize>(
 /// N at the new state on the stack, column-major, and its factors once
 /// made in its structural band (`ws.n.band`); the workspace for N at the
 /// last checked state and for the factors' copy.
-struct StackN<'a, const M: usize> {
-    a: [[f64; M]; M],
-    piv: [usize; M],
-    band: Band,
-    ws: &'a mut Workspace,
+pub(crate) struct StackN<'a, const M: usize> {
+    pub(crate) a: [[f64; M]; M],
+    pub(crate) piv: [usize; M],
+    pub(crate) band: Band,
+    pub(crate) ws: &'a mut Workspace,
 }
 
 impl<const M: usize> StackN<'_, M> {
@@ -213,7 +80,7 @@ impl<const M: usize> StackN<'_, M> {
     /// outside N's band are structural zeros, which add nothing), N_prev ←
     /// N, and the fill of a banded LU zeroed.
     #[inline(always)]
-    fn read(&mut self) -> (f64, f64) {
+    pub(crate) fn read(&mut self) -> (f64, f64) {
         let band = self.band;
         if band != Band::full(M) {
             let fill = band.lower + band.upper;
@@ -299,7 +166,7 @@ struct Iterate<const D: usize, const M: usize> {
     r: [f64; M],
 }
 
-/// q1(λ) and r(λ) as `classical::residual` computes them (λ = 0 when
+/// q1(λ) and r(λ) as `shake::classical::residual` computes them (λ = 0 when
 /// `lambda` is `None`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -339,7 +206,7 @@ fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
 }
 
 /// SHAKE's Jacobian −h G(q1) A G0ᵀ at `q1`, factorised in `jac`/`piv`, as
-/// `classical::jacobian` forms it (the list of terms when A is diagonal,
+/// `shake::classical::jacobian` forms it (the list of terms when A is diagonal,
 /// else the column groups through `grad_p`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -402,7 +269,7 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
     .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
-/// `classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
+/// `shake::classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
 /// the last λ, its first iterate and the last residual r are left in
 /// `ws.lambda`, `ws.lambda_first` and `ws.g` (on failure too, as the slice
 /// path leaves them), G0 and G at the last Jacobian's q1 packed in
@@ -410,7 +277,7 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
 /// after the step reads them before writing them.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
+pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     (a, b): (f64, f64),
     h: f64,
@@ -440,7 +307,7 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         &mut cl.g0,
     );
     // g's round-off level near q0 and ‖∂g_i/∂z‖₁ at q0, in one pass over
-    // G0 (as the slice path, `classical::shake_step`).
+    // G0 (as the slice path, `shake::classical::shake_step`).
     let mut floor = [0.0; M];
     ws.g_size.fill(0.0);
     for (&(i, k), &g) in cl.pattern.iter().zip(&cl.g0) {
@@ -467,7 +334,7 @@ fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         if !(r.is_finite() && all_finite(&it.r) && all_finite(&it.dq)) {
             break Err(not_finite(iterations));
         }
-        // At round-off: the confirming update (`classical::shake_step`).
+        // At round-off: the confirming update (`shake::classical::shake_step`).
         let at_floor = r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f);
         if at_floor && (r == 0.0 || need_jacobian || iterations >= opts.max_iterations) {
             break Ok(());

@@ -1,64 +1,39 @@
-//! The classical step of one constraint on stack arrays of the system's
-//! own size: what `constrained_system!` calls when it can see d at compile
-//! time, m = 1, g holonomic and H separable with quadratic T.
+//! SHAKE for one constraint on stack arrays of the system's own size: the
+//! kernel of the fixed-size classical step (`step::classical`), which
+//! `constrained_system!` reaches when it can see d at compile time, m = 1,
+//! g holonomic and H separable with quadratic T.
 //!
-//! The map is the classical path's (the parent module): the same kick, the
-//! same Newton iteration on λ, the same checks of the guard
-//! (`crate::guard`) and the same Π, so it gives the same steps to
-//! round-off (`tests/fast_paths.rs`; the same bits for a constraint of
+//! The map is the slice path's (the parent module): the same kick, the
+//! same Newton iteration on λ and the same Π, so it gives the same steps
+//! to round-off (`tests/fast_paths.rs`; the same bits for a constraint of
 //! degree ≤ 2, [`ConstrainedSystem::quadratic_constraints`], whose first
 //! iterate both paths take as the root of g's exact quadratic along
-//! SHAKE's line, `classical::quadratic_root`). What differs is
-//! where the numbers live:
-//! `[f64; D]` and scalars instead of the workspace's vectors, so that the
-//! generated derivatives inline with their lengths known, the Newton
-//! matrix N = G A Gᵀ and SHAKE's Jacobian are numbers (their factorisation
-//! a reciprocal, the nondegeneracy check and condition estimate O(1)), and
-//! nothing is copied to and from the heap. The slice path costs 0.24 µs
-//! more than a hand-written step of the pendulum (8× its cost); that cost
-//! was the loops over run-time lengths, the copies and the 1×1 "matrices".
-//!
-//! The step reaches a system through [`ConstrainedSystem::with_sizes`]: a
-//! system that offers d and m as constants gets it (`Substep` is a
-//! [`SizeVisitor`](crate::SizeVisitor)). A wrapper around a system (one
-//! that changes any of its functions) must not forward `with_sizes` to the
-//! wrapped system: this step would call the wrapped system's functions,
-//! not the wrapper's.
+//! SHAKE's line, `quadratic_root`). What differs is where the numbers
+//! live: `[f64; D]` and scalars instead of the workspace's vectors, so
+//! that the generated derivatives inline with their lengths known, the
+//! Newton matrix N = G A Gᵀ and SHAKE's Jacobian are numbers (their
+//! factorisation a reciprocal, the nondegeneracy check and condition
+//! estimate O(1)), and nothing is copied to and from the heap. The slice
+//! path costs 0.24 µs more than a hand-written step of the pendulum (8×
+//! its cost); that cost was the loops over run-time lengths, the copies
+//! and the 1×1 "matrices".
 
-use super::lane::Lane;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::guard::Guard;
 use crate::newton::NewtonOptions;
-use crate::rattle::NondegeneracyCheck;
-use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
 
-/// One substep's arguments, the visitor [`ConstrainedSystem::with_sizes`] takes:
-/// the state in place, the step size, the kick fractions of the base map,
-/// whether Π follows, and the integrator's guard, workspace and carry.
-/// Built only by the runtime.
-pub struct Substep<'a> {
-    pub(crate) q: &'a mut [f64],
-    pub(crate) p: &'a mut [f64],
-    pub(crate) h: f64,
-    pub(crate) kdk: (f64, f64),
-    pub(crate) project: bool,
-    pub(crate) step: u64,
-    pub(crate) t: f64,
-    pub(crate) newton: NewtonOptions,
-    pub(crate) guard: &'a mut Guard,
-    pub(crate) ws: &'a mut Workspace,
-    pub(crate) carry: Option<&'a mut [f64]>,
-    /// Where to write Π of the new state when `project` is false (a lazily
-    /// projecting run shows it): a substep that succeeds writes it.
-    pub(crate) show: Option<&'a mut State>,
-    /// A run's steps to take in this call instead of one substep
-    /// (`classical::lane`): the step loops here, where the system's sizes
-    /// are known.
-    pub(crate) lane: Option<Lane<'a>>,
+/// What [`shake`] hands the checks: the new state z1⁻, r = g(q1) (the
+/// state's residual up to the rounding of z0 + Δ), ‖G0‖₁ (the scale of
+/// the test that z1⁻ is on M) and the iteration's report.
+pub(crate) struct Shaken<const D: usize> {
+    pub(crate) q: [f64; D],
+    pub(crate) p: [f64; D],
+    pub(crate) r: f64,
+    pub(crate) g_size: f64,
+    pub(crate) report: ShakeReport,
 }
 
 /// SHAKE's residual along its line: q1(λ) = q0 + h A (p0 + kick − λ G0ᵀ)
@@ -168,93 +143,22 @@ fn quadratic_root<S: ConstrainedSystem, const D: usize>(
     super::quadratic_root(h, r0, r1, whw)
 }
 
-/// The fixed-size classical step as a size visitor
-/// ([`ConstrainedSystem::with_sizes`]): m = 1 takes [`substep`], two to
-/// eight constraints `fixed_m::substep`; `None` (run-time sizes, or a
-/// state whose length is not `D`) leaves the step to the slice path.
-impl<S: ConstrainedSystem> crate::system::SizeVisitor<S> for Substep<'_> {
-    type Output = Option<Result<StepInfo, StepError>>;
-    #[inline]
-    fn fixed<const D: usize, const M: usize>(self, sys: &S) -> Self::Output {
-        match M {
-            1 => substep::<S, D>(sys, self),
-            _ => super::fixed_m::substep::<S, D, M>(sys, self),
-        }
-    }
-    #[inline]
-    fn dynamic(self, _: &S) -> Self::Output {
-        None
-    }
-}
-
-/// One classical substep for m = 1 and d = `D` (module docs): SHAKE, the
-/// guard's checks, then Π if asked; or the steps of a run's lane
-/// (`Substep::lane`, `classical::lane`). `None` when the state's length
-/// is not `D` (the caller takes the slice path).
-#[inline]
-pub fn substep<S: ConstrainedSystem, const D: usize>(
-    sys: &S,
-    mut cx: Substep<'_>,
-) -> Option<Result<StepInfo, StepError>> {
-    if cx.q.len() != D || cx.p.len() != D || sys.constraint_count() != 1 {
-        return None;
-    }
-    if let Some(lane) = cx.lane.take() {
-        let one = |cx: &mut Substep<'_>,
-                   (q, p): (&mut [f64; D], &mut [f64; D]),
-                   k,
-                   t,
-                   show: Option<&mut State>| {
-            let info;
-            (*q, *p, info) = run_substep::<S, D>(sys, cx, *q, *p, k, t, show)?;
-            Ok(info)
-        };
-        return Some(super::lane::run(&mut cx, lane, one));
-    }
-    let (step, t, show) = (cx.step, cx.t, cx.show.take());
-    Some(in_place::<S, D>(sys, &mut cx, step, t, show))
-}
-
-/// [`run_substep`] from and into `cx.q`, `cx.p` (left as they were on an
-/// error).
+/// SHAKE for m = 1 from (q0, p0) on the stack (module docs): the new state
+/// z1⁻ and what the checks read ([`Shaken`]); λ, its first iterate and r
+/// left in `ws` as the slice path leaves them. The caller times the error
+/// (`StepError::at`).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn in_place<S: ConstrainedSystem, const D: usize>(
+pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
     sys: &S,
-    cx: &mut Substep<'_>,
-    step: u64,
-    t: f64,
-    show: Option<&mut State>,
-) -> Result<StepInfo, StepError> {
-    let (Ok(q0), Ok(p0)) = (<[f64; D]>::try_from(&*cx.q), <[f64; D]>::try_from(&*cx.p)) else {
-        // (`substep` checked the lengths.)
-        return Err(StepError::InvalidInput {
-            what: "state length differs from the system's fixed size",
-            value: cx.q.len() as f64,
-        });
-    };
-    let (q, p, info) = run_substep(sys, cx, q0, p0, step, t, show)?;
-    cx.q.copy_from_slice(&q);
-    cx.p.copy_from_slice(&p);
-    Ok(info)
-}
-
-/// The substep from (q0, p0) at step `step`, time `t`: the new state and
-/// what the step did, or the first check it failed. Π of the new state
-/// goes into `show` when given and the substep is not projected.
-#[inline(always)]
-fn run_substep<S: ConstrainedSystem, const D: usize>(
-    sys: &S,
-    cx: &mut Substep<'_>,
+    (a, b): (f64, f64),
+    h: f64,
     q0: [f64; D],
     p0: [f64; D],
-    step: u64,
-    t: f64,
-    show: Option<&mut State>,
-) -> Result<([f64; D], [f64; D], StepInfo), StepError> {
-    let (a, b) = cx.kdk;
-    let h = cx.h;
-    let opts = &cx.newton;
-    let at = |e: StepError| e.at(step, t);
+    ws: &mut Workspace,
+    opts: &NewtonOptions,
+    carry: Option<&mut [f64]>,
+) -> Result<Shaken<D>, StepError> {
     // The first kick and G0.
     let mut hq = [0.0; D];
     sys.grad_q(&q0, &p0, &mut hq);
@@ -280,19 +184,15 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
     let mut inv_j = f64::NAN;
     let mut lambda_noise = 0.0;
     let mut r_first = 0.0;
-    let not_finite = |iterations| {
-        at(StepError::from_solve(
-            Stage::Shake,
-            SolveError::NonFinite { iterations },
-        ))
-    };
+    let not_finite =
+        |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
     // A distance constraint: the first iterate is the root of g's exact
     // quadratic along the line, in place of the loop's Newton update and
     // fitted root (the same root, one residual fewer). At g's round-off
     // there (the loop's own test) the iteration is done; otherwise it
     // goes on from it as from that one. (Before the loop rather than in
     // its first pass: there it made the step 20 % slower.)
-    let g_qq = &cx.ws.classical.g_qq;
+    let g_qq = &ws.classical.g_qq;
     let mut solved = false;
     if !g_qq.is_empty() && r.is_finite() && r.abs() > floor {
         if let Some((root, first, r1)) = quadratic_root(sys, h, (&q0, &p0, &g0), &q1, r, g_qq) {
@@ -310,23 +210,23 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
             if !r.is_finite() || !dq.iter().all(|x| x.is_finite()) {
                 return Err(not_finite(iterations));
             }
-            // At round-off: the confirming update (`classical::shake_step`).
+            // At round-off: the confirming update (`shake::classical::shake_step`).
             let at_floor = r == 0.0 || r.abs() <= floor;
             if at_floor && (r == 0.0 || iterations == 0 || iterations >= opts.max_iterations) {
                 break;
             }
             if iterations >= opts.max_iterations {
-                return Err(at(StepError::from_solve(
+                return Err(StepError::from_solve(
                     Stage::Shake,
                     SolveError::NotConverged {
                         iterations,
                         residual: r.abs(),
                     },
-                )));
+                ));
             }
             if iterations == 0 {
                 r_first = r.abs();
-                inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, 0).map_err(at)?;
+                inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, 0)?;
             }
             let delta = r * inv_j;
             lambda -= delta;
@@ -378,7 +278,7 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
             }
             fresh = false;
             if theta > 0.25 {
-                inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, iterations).map_err(at)?;
+                inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, iterations)?;
                 fresh = true;
                 refreshed |= step_size <= opts.stagnation_threshold * size.max(1.0);
             }
@@ -394,7 +294,7 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
         }
     }
     let (mut q, mut p) = (q0, p0);
-    match cx.carry.as_deref_mut() {
+    match carry {
         Some(c) => {
             let (cq, cp) = c.split_at_mut(D);
             for k in 0..D {
@@ -424,83 +324,26 @@ fn run_substep<S: ConstrainedSystem, const D: usize>(
             0.0
         },
     };
-    let mut info = StepInfo {
-        shake_iterations: iterations,
-        lambda: report.lambda,
-        ..StepInfo::default()
-    };
-    // As the slice path leaves them, whether the checks below pass or not:
-    // g at the new state, and the multipliers where the diagnostics read
-    // them. (The state itself goes to the caller only if they pass; after
+    // As the slice path leaves them, whether the checks pass or not: g at
+    // the new state, and the multipliers where the diagnostics read them.
+    // (The state itself goes to the caller only if the checks pass; after
     // a failed step nothing reads it.)
-    let ws = &mut *cx.ws;
     ws.g[0] = r;
     ws.lambda[0] = lambda;
     ws.lambda_first[0] = lambda_first;
-    Guard::finite(&q, &p, "state", step, t)?;
-    // The guard, with N = {{H,g},g} a number: its factorisation is itself,
-    // its condition estimate 1/|N|.
-    let guard = &mut *cx.guard;
-    let scales = (
-        crate::tolerance::max_abs(&q, &[]),
-        crate::tolerance::max_abs(&[], &p),
-    );
-    let size = g0.iter().map(|x| x.abs()).sum::<f64>();
-    guard.on_m(
-        Stage::Shake,
-        &[r],
-        &[size],
-        &ws.g_reads,
-        scales,
-        iterations,
-        step,
-        t,
-    )?;
-    let mut n = [0.0];
-    sys.nondegeneracy_matrix(&q, &p, &mut n);
-    let n = n[0];
-    let nd = if !n.is_finite() {
-        NondegeneracyCheck {
-            det: f64::NAN,
-            norm: n.abs(),
-            inverse_norm: f64::INFINITY,
-        }
-    } else if n == 0.0 {
-        NondegeneracyCheck {
-            det: 0.0,
-            norm: 0.0,
-            inverse_norm: f64::INFINITY,
-        }
-    } else {
-        NondegeneracyCheck {
-            det: n,
-            norm: n.abs(),
-            inverse_norm: 1.0 / n.abs(),
-        }
-    };
-    // As `read_n` and `factor_and_check` leave the workspace: N
-    // factorised in `jac` (for the lazy Π of `classical::project`), N in
-    // `n.mat` and `n.prev`.
-    let change = (n - ws.n.prev[0]).abs();
-    ws.n.prev[0] = n;
-    ws.n.mat[0] = n;
-    ws.jac[0] = n;
-    guard.judge_shake(&nd, change, &report, &mut info, cx.project, h, step, t)?;
-    if cx.project {
-        (p, ws.sigma[0]) = project(sys, &q, p, n);
-        info.rattle_iterations = 1;
-        // (Π can overflow where SHAKE did not: `check_and_project`.)
-        Guard::finite(&q, &p, "state", step, t)?;
-    } else if let Some(z) = show {
-        self::show(sys, &q, &p, n, &mut ws.sigma[0], z);
-    }
-    Ok((q, p, info))
+    Ok(Shaken {
+        q,
+        p,
+        r,
+        g_size: g0.iter().map(|x| x.abs()).sum::<f64>(),
+        report,
+    })
 }
 
-/// Π of the new state into `z`, for the run to show (`Substep::show`).
+/// Π of the new state into `z`, for a lazily projecting run to show.
 /// Out of line: inlined, its registers slowed the step itself.
 #[inline(never)]
-fn show<S: ConstrainedSystem, const D: usize>(
+pub(crate) fn show<S: ConstrainedSystem, const D: usize>(
     sys: &S,
     q: &[f64; D],
     p: &[f64; D],
@@ -516,10 +359,10 @@ fn show<S: ConstrainedSystem, const D: usize>(
 
 /// Π at (q, p) given N = {{H,g},g} there: one solve N σ = {g, H}, then
 /// the kick p ← p − σ G(q)ᵀ (the fibre flow). Returns the new p and σ.
-/// The operations of `classical::project` (the slice path's lazy Π), in
+/// The operations of `shake::classical::project` (the slice path's lazy Π), in
 /// its order.
 #[inline(always)]
-fn project<S: ConstrainedSystem, const D: usize>(
+pub(crate) fn project<S: ConstrainedSystem, const D: usize>(
     sys: &S,
     q: &[f64; D],
     mut p: [f64; D],

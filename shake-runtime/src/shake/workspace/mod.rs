@@ -2,6 +2,10 @@
 //! band of its Jacobian (predicted from the declared pattern of g_z and the
 //! Hessian's structure) and the band of N.
 
+mod classical;
+
+pub(crate) use classical::{packed_jacobian, Buffers};
+
 use crate::fibre::FibreFlow;
 use crate::linalg::Band;
 use crate::system::ConstrainedSystem;
@@ -57,7 +61,7 @@ pub(crate) struct Workspace {
     pub(crate) probe: Probe,
     pub(crate) jv: Vec<f64>,
     /// The classical path's buffers and structure (`classical`).
-    pub(crate) classical: crate::classical::Buffers,
+    pub(crate) classical: classical::Buffers,
     /// ‖∂g_i/∂z‖₁ where it was last measured (the state being checked, or
     /// the start of the step): the scale of the constraint tolerance.
     pub(crate) g_size: Vec<f64>,
@@ -73,7 +77,7 @@ pub(crate) struct Workspace {
 #[derive(Clone, Debug)]
 pub(crate) struct NBuffers {
     /// N, as the system writes it (the slice path's; the fixed-size step
-    /// of 2 to 8 constraints reads N on the stack, `classical::fixed_m`).
+    /// of 2 to 8 constraints reads N on the stack, `shake::classical::fixed_m`).
     pub(crate) mat: Vec<f64>,
     /// N at the previous checked state (the fold indicator of
     /// `Guard::check_n` compares the two); zero outside N's band.
@@ -104,7 +108,7 @@ pub(crate) struct Probe {
 
 impl Workspace {
     /// The buffers for `sys`; `classical` says whether its steps take the
-    /// classical path (`crate::classical::classical`), where SHAKE's
+    /// classical path (`crate::shake::classical::classical`), where SHAKE's
     /// Jacobian −h G(q1) A G0ᵀ lies in its predicted band exactly.
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S, classical: bool) -> Self {
         let d = sys.dof();
@@ -165,7 +169,7 @@ impl Workspace {
                 lambda_scale: 0.0,
             },
             jv: vec![0.0; m],
-            classical: crate::classical::Buffers::new(sys, jac_band, groups),
+            classical: classical::Buffers::new(sys, jac_band, groups),
             g_size: vec![0.0; m],
             polish_keep: vec![0.0; 2 * m + 2 * n],
             g_reads: crate::tolerance::reads(sys.jacobian_pattern(), d, m),
