@@ -4,8 +4,9 @@
 //! last good state.
 //!
 //! - this file: [`Stop`], [`RunOutcome`], the [`Run`] builder and its loop;
-//! - `record`: storing (and for a lazily projected RATTLE
-//!   run, projecting) one state;
+//! - `stepper`: what the loop asks of the integrator it runs (start, step,
+//!   store), which [`Integrator`](crate::Integrator) implements;
+//! - `lane`: the loop inside the fixed-size classical step;
 //! - `event`: what an `on_step` observer sees.
 //!
 //! The step itself is the [`step`](crate::step) maps'; the checks are the
@@ -17,23 +18,17 @@
 //! loop and the substep (`tests/run_lane.rs`).
 
 mod event;
-mod lane;
-mod record;
-
-use std::ops::ControlFlow;
+pub(crate) mod lane;
+pub(crate) mod stepper;
 
 pub use event::{StepEvent, StepObserver};
 
-use crate::base_map::BaseMap;
 use crate::diagnostics::Accumulator;
 use crate::error::StepError;
-use crate::integrator::Integrator;
-use crate::rattle::project_hidden;
 use crate::state::State;
-use crate::step::Method;
-use crate::system::ConstrainedSystem;
-use crate::trajectory::{Names, Trajectory};
+use crate::trajectory::Trajectory;
 use lane::{Lane, LaneEnd};
+use stepper::{Projection, Stepper};
 
 /// When a run stops.
 ///
@@ -89,72 +84,7 @@ impl RunOutcome {
     }
 }
 
-impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
-    /// A run from `z0` until `stop`; configure it with
-    /// [`Run::stride`], [`Run::observe`], … and start it with
-    /// [`Run::execute`].
-    ///
-    /// A RATTLE run steps with SHAKE and applies Π only to the states it
-    /// stores or observes: since Π ∘ S_hᵏ = Π ∘ R_hᵏ (the paper's equation
-    /// after Proposition 4.2; see [`rattle`](crate::rattle)) these are the
-    /// RATTLE states, at a fraction of the cost.
-    ///
-    /// ```
-    /// use shake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
-    /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.01);
-    /// let mut energies = Vec::new();
-    /// let out = integ
-    ///     .run(State::from_slices(&[0.0, -1.0], &[1.0, 0.0]), Stop::Time(2.0))
-    ///     .stride(50)
-    ///     .observe(|_step, _t, z| energies.push(0.5 * z.p.norm_squared() + z.q[1]))
-    ///     .execute();
-    /// assert!(out.error.is_none());
-    /// assert_eq!(energies.len(), 5);
-    /// assert!(energies.iter().all(|e| (e - energies[0]).abs() < 1e-4));
-    /// ```
-    pub fn run(&mut self, z0: State, stop: Stop) -> Run<'_, S, B, fn(u64, f64, &State)> {
-        Run {
-            integ: self,
-            z0,
-            stop,
-            stride: 1,
-            store: true,
-            t0: 0.0,
-            observer: |_, _, _| {},
-            on_step: None,
-        }
-    }
-
-    /// [`run`](Self::run) with default settings and `on_step` called after
-    /// every step (see [`Run::on_step`]): the hook a progress indicator
-    /// uses. `ControlFlow::Break(())` ends the run early, without error.
-    ///
-    /// ```
-    /// use std::ops::ControlFlow;
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
-    /// let mut done = 0.0;
-    /// let out = integ.run_observed(
-    ///     State::from_slices(&[0.0, -1.0], &[0.5, 0.0]),
-    ///     Stop::Steps(20),
-    ///     &mut |e| {
-    ///         done = e.step as f64 / e.steps as f64;
-    ///         ControlFlow::Continue(())
-    ///     },
-    /// );
-    /// assert!(out.error.is_none() && done == 1.0);
-    /// ```
-    pub fn run_observed(
-        &mut self,
-        z0: State,
-        stop: Stop,
-        on_step: &mut impl FnMut(&StepEvent) -> ControlFlow<()>,
-    ) -> RunOutcome {
-        self.run(z0, stop).on_step(on_step).execute()
-    }
-}
-
-/// A configured run; see [`Integrator::run`].
+/// A configured run; see [`Integrator::run`](crate::Integrator::run).
 ///
 /// ```
 /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
@@ -167,8 +97,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 /// assert_eq!(out.trajectory.times(), vec![1.0, 1.5, 2.0]);
 /// ```
 #[must_use = "a run does nothing until `execute` is called"]
-pub struct Run<'a, S: ConstrainedSystem, B: BaseMap, F> {
-    integ: &'a mut Integrator<S, B>,
+pub struct Run<'a, T, F> {
+    integ: &'a mut T,
     z0: State,
     stop: Stop,
     stride: u64,
@@ -178,7 +108,27 @@ pub struct Run<'a, S: ConstrainedSystem, B: BaseMap, F> {
     on_step: Option<&'a mut StepObserver<'a>>,
 }
 
-impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S, B, F> {
+impl<'a, T> Run<'a, T, fn(u64, f64, &State)> {
+    /// A run of `integ` from `z0` until `stop`, with the defaults: stride
+    /// 1, states stored, start time 0, no observers.
+    pub(crate) fn new(integ: &'a mut T, z0: State, stop: Stop) -> Self {
+        Run {
+            integ,
+            z0,
+            stop,
+            stride: 1,
+            store: true,
+            t0: 0.0,
+            observer: |_, _, _| {},
+            on_step: None,
+        }
+    }
+}
+
+// The driver runs the crate's steppers only (`Stepper` is the crate's
+// own); users reach it through `Integrator::run`.
+#[allow(private_bounds)]
+impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     /// Store (and observe) every `k`-th state, plus the first and the last
     /// (default 1; 0 is an [`StepError::InvalidInput`]).
     ///
@@ -234,7 +184,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
     ///     .observe(|_, t, _| times.push(t)).execute();
     /// assert_eq!(times, vec![0.0, 0.1, 0.2]);
     /// ```
-    pub fn observe<G: FnMut(u64, f64, &State)>(self, observer: G) -> Run<'a, S, B, G> {
+    pub fn observe<G: FnMut(u64, f64, &State)>(self, observer: G) -> Run<'a, T, G> {
         Run {
             integ: self.integ,
             z0: self.z0,
@@ -303,8 +253,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             error: Some(e),
         };
         if let Err(e) = integ
-            .check_h()
-            .and_then(|_| integ.check_dims(&z0))
+            .check_start(&z0)
             .and_then(|_| StepError::finite_input("start time must be finite", t0))
         {
             return fail(traj, e);
@@ -318,7 +267,8 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 },
             );
         }
-        let h = integ.h;
+        let h = integ.step_size();
+        let (dof, names) = integ.layout();
         let n = match stop {
             Stop::Steps(n) => n,
             Stop::Time(t_end) => {
@@ -354,17 +304,17 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         // (a failing run may add its last good state: the buffer grows).
         let capacity = if store {
             // (reserved up to 256 MB; a longer run grows the buffer)
-            let budget = (1usize << 28) / (16 * integ.system.dof().max(1));
+            let budget = (1usize << 28) / (16 * dof.max(1));
             usize::try_from((n / stride).saturating_add(1 + u64::from(n % stride != 0)))
                 .unwrap_or(usize::MAX)
                 .min(budget)
         } else {
             0
         };
-        traj = Trajectory::new(integ.system.dof(), t0, h, stride, capacity);
-        traj.set_names(Names::of(&integ.system));
-        if integ.diagnostics {
-            traj.set_constraints(integ.system.constraint_count());
+        traj = Trajectory::new(dof, t0, h, stride, capacity);
+        traj.set_names(names);
+        if integ.diagnostics() {
+            traj.set_constraints(integ.constraint_count());
             traj.reserve_multipliers(capacity);
         }
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
@@ -372,29 +322,11 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         let mut prev_q = q.clone();
         let mut prev_p = p.clone();
         let mut scratch = z0;
-        // SHAKE's difference quotients take their scale from the first state
-        // they meet: this run's, not whatever an earlier run on this
-        // integrator started from (an ensemble reuses one integrator per
-        // thread; a member's result must not depend on its neighbours).
-        integ.steps.map.ws.probe.lambda_scale = 0.0;
-        if let Err(e) = integ.begin(&q, &p, 0, t0) {
-            return fail(traj, e);
-        }
-        integ.carrying = true;
-        let per_step = integ.method == Method::Rattle && integ.guard.options.project_every_step;
+        let Projection { per_step, lazy } = match integ.begin_run(&mut q, &mut p, t0) {
+            Ok(projection) => projection,
+            Err(e) => return fail(traj, e),
+        };
         let mut acc = Accumulator::default();
-        // The initial state: projected for RATTLE, as given for SHAKE.
-        if per_step {
-            if let Err(e) = project_hidden(
-                &integ.system,
-                &mut q,
-                &mut p,
-                &mut integ.steps.map.ws,
-                integ.guard.newton(),
-            ) {
-                return fail(traj, e.at(0, t0));
-            }
-        }
         if let Err(e) = integ.record(
             &q,
             &p,
@@ -411,8 +343,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         }
         let mut last_recorded = 0;
         // A lazily projecting RATTLE run keeps the SHAKE state of its last
-        // stored step, to replay from it on failure (`replay_lazy`).
-        let lazy = integ.method == Method::Rattle && !per_step;
+        // stored step, to replay from it on failure (`Stepper::replay`).
         let (mut rec_q, mut rec_p) = (q.clone(), p.clone());
         // The common case, one fixed-size classical substep a step and
         // nothing to see between stored states, loops inside that step
@@ -420,8 +351,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
         // step that failed, with what this loop would hold there.
         let mut first = 1;
         let mut handed = None;
-        if n > 0 && on_step.is_none() && !integ.diagnostics && integ.steps.composition.stages() == 1
-        {
+        if n > 0 && on_step.is_none() {
             let mut end = LaneEnd::default();
             let lane = Lane {
                 first: 1,
@@ -437,20 +367,8 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                 rec: (&mut rec_q, &mut rec_p),
                 end: &mut end,
             };
-            let carry = (integ.compensated && integ.carrying).then_some(integ.carry.as_mut_slice());
-            // (What the lane did is read from its own record, not from
-            // the hook's answer: a hand-written hook could change that.)
-            let _ = lane::enter(
-                &mut integ.steps.map,
-                &integ.system,
-                &mut integ.guard,
-                &mut q,
-                &mut p,
-                h,
-                per_step,
-                carry,
-                lane,
-            );
+            // (What the lane did is read from its own record.)
+            integ.lane(&mut q, &mut p, per_step, lane);
             match end {
                 // A hook that answered without the runtime's fixed-size
                 // step did nothing: this loop runs.
@@ -485,7 +403,7 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
                         let mut last = k - 1;
                         if lazy {
                             let (good, first) =
-                                integ.replay_lazy(&mut rec_q, &mut rec_p, last_recorded, k, t0);
+                                integ.replay(&mut rec_q, &mut rec_p, last_recorded, k, t0);
                             prev_q.copy_from_slice(&rec_q);
                             prev_p.copy_from_slice(&rec_p);
                             last = good;
@@ -528,11 +446,10 @@ impl<'a, S: ConstrainedSystem, B: BaseMap, F: FnMut(u64, f64, &State)> Run<'a, S
             let on_stride = k % stride == 0 || k == n;
             // A state the run shows: its Π made by the step where it can
             // (`StepMap::show`).
-            integ.steps.map.show = lazy && on_stride;
-            let info = match integ.advance(&mut q, &mut p, per_step, k, t) {
+            let info = match integ.advance(&mut q, &mut p, per_step, k, t, lazy && on_stride) {
                 Ok(info) => {
                     acc.add(&info);
-                    if integ.diagnostics && last_recorded == k - 1 {
+                    if integ.diagnostics() && last_recorded == k - 1 {
                         integ.fill_leaving_lambda(&mut traj, per_step);
                     }
                     info

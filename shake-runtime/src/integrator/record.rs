@@ -20,7 +20,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// the SHAKE state z⁻, so its λ also carries the projection's σ (same
     /// fibre, same point: the parameters add); σ is taken off so that the
     /// record's λ is RATTLE's, from the state on M^H.
-    pub(super) fn fill_leaving_lambda(&mut self, traj: &mut Trajectory, per_step: bool) {
+    pub(crate) fn fill_leaving_lambda(&mut self, traj: &mut Trajectory, per_step: bool) {
         let m = self.system.constraint_count();
         let lead = if self.steps.composition.stages() == 1 {
             &self.steps.map.ws.lambda
@@ -42,7 +42,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// exists. Returns that step (its SHAKE state left in (q, p)) and the
     /// projection's error where one failed before step k. Runs only on
     /// failure; the replayed steps equal the original ones to round-off.
-    pub(super) fn replay_lazy(
+    pub(crate) fn replay_lazy(
         &mut self,
         q: &mut [f64],
         p: &mut [f64],
@@ -133,7 +133,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 
     /// Stores (and shows to the observer) the state (q, p) at step k.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn record<F: FnMut(u64, f64, &State)>(
+    pub(crate) fn record<F: FnMut(u64, f64, &State)>(
         &mut self,
         q: &[f64],
         p: &[f64],

@@ -17,6 +17,9 @@
 //! assert_eq!(out.trajectory.len(), 11);
 //! ```
 
+mod record;
+mod stepper;
+
 use crate::base_map::BaseMap;
 use crate::composition::Composition;
 use crate::error::StepError;
