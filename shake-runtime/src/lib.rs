@@ -76,7 +76,6 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod base_map;
-#[doc(hidden)]
 pub mod compensated;
 pub mod composition;
 pub mod diagnostics;

@@ -167,3 +167,78 @@ pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
     }
     norm_inf(q).max(norm_inf(p))
 }
+
+/// 1 / (√a · √b): the reciprocal of a particle constraint's scale from the
+/// squares of its two factors, a = |∇g|² and b = the member's extent²
+/// (Σ_a |x_a − x̄|², or |x|² for one particle), or b = |M⁻¹p|² over its
+/// particles for the hidden constraint. A residual r is then judged by
+/// |r| · inverse_scale ≤ tol: r is never squared and the roots are taken
+/// apart, so the ratio stays right where g² or a·b would underflow (length
+/// scales down to ~1e-150; g² underflows below ~1e-154 and made a cluster
+/// "converge" at once). A zero scale gives 1/f64::MIN_POSITIVE, finite, so
+/// that a nonzero residual still fails; NaN stays NaN (and fails `<=`).
+#[inline(always)]
+pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
+    let ab = a * b;
+    if ab.is_normal() {
+        // (One root where the product is representable: the common case.)
+        return 1.0 / ab.sqrt();
+    }
+    1.0 / (a.sqrt() * b.sqrt()).max(f64::MIN_POSITIVE)
+}
+
+/// |a · b| / (|a| |b|): a hidden constraint ∇g · M⁻¹p relative to its
+/// scale |∇g| |M⁻¹p|, with both vectors scaled by their largest entry
+/// first, so that neither the squares nor the product of the norms can
+/// underflow or overflow (masses of 1e300 and 1e-300 made |M⁻¹p|²
+/// overflow and the ratio read 0 for a velocity 10 % off its tangent). 0
+/// when b = 0 (nothing moves: the constraint holds); NaN when a = 0 (a
+/// degenerate gradient) or either holds NaN or ∞, so that the test fails.
+#[inline(always)]
+pub(crate) fn relative_dot(a: &[f64], b: &[f64]) -> f64 {
+    let (mut dot, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        dot += x * y;
+        aa += x * x;
+        bb += y * y;
+    }
+    // The sums as they are when nothing over- or underflowed: both well
+    // inside the range (so no term that matters fell below it) and their
+    // product finite.
+    let ab = aa * bb;
+    if aa > 1e-200 && bb > 1e-200 && ab < f64::INFINITY {
+        return dot.abs() / ab.sqrt();
+    }
+    relative_dot_scaled(a, b)
+}
+
+/// [`relative_dot`] with both vectors scaled by their largest entry.
+#[cold]
+fn relative_dot_scaled(a: &[f64], b: &[f64]) -> f64 {
+    let am = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let bm = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if bm == 0.0 && a.iter().all(|x| x.is_finite()) {
+        return 0.0;
+    }
+    if !(am.is_finite() && bm.is_finite()) || am == 0.0 {
+        return f64::NAN;
+    }
+    let (ia, ib) = (1.0 / am, 1.0 / bm);
+    let (mut dot, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (x * ia, y * ib);
+        dot += x * y;
+        aa += x * x;
+        bb += y * y;
+    }
+    dot.abs() / (aa.sqrt() * bb.sqrt())
+}
+
+/// The largest relative hidden-constraint residual (|∇g · M⁻¹p| over
+/// |∇g| |M⁻¹p|, [`relative_dot`]) a particle projection may leave. The
+/// projection solves N μ = G M⁻¹ p exactly, so it leaves about κ(N) ε;
+/// above √ε, κ(N) exceeds 1/√ε and N is singular to half the working
+/// precision (a triangle forced collinear left 1.7e-6, masses of 1e300 and
+/// 1e-300 left 0.1). The Newton tolerance of the positions does not enter:
+/// it bounds an iteration, and this is a linear solve.
+pub(crate) const HIDDEN_LIMIT: f64 = 1.4901161193847656e-8;

@@ -283,6 +283,7 @@ impl Global {
         num: &Numbering,
         q1: &[f64],
         pn: &mut [f64],
+        tol: f64,
         k: u64,
         time: f64,
         report: &mut StepReport,
@@ -302,17 +303,45 @@ impl Global {
         self.hidden(system, num, pn, false);
         self.solver.solve(&mut self.delta);
         Self::scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
-        // The hidden residual after projection, relative per member.
+        // The position stage's result judged at its own scale (its test
+        // used q0's, which from far off M is the far point's): g(q1) and
+        // the scales at q1 are in hand from the gradients above.
+        let mut worst_g = 0.0f64;
+        let mut worst_c = 0;
+        for (c, (&g, &s)) in self.g.iter().zip(&self.scale1).enumerate() {
+            let r = g.abs() / s;
+            if !(r <= worst_g) {
+                worst_g = r;
+                worst_c = c;
+            }
+        }
+        if !(worst_g <= tol) {
+            let (f, member) = num.locate(worst_c);
+            return Err(ParticleError::NotConverged {
+                step: k,
+                time,
+                residual: worst_g,
+                iterations: report.newton_iterations,
+                family: system.constraint_families()[f].name().to_string(),
+                member,
+            });
+        }
+        // The hidden residual after projection, relative per member: above
+        // round-off after an exact solve (or NaN), N is singular to
+        // working precision.
         let worst = self.hidden(system, num, pn, true);
-        report.max_hidden = worst.sqrt();
+        if !(worst <= crate::tolerance::HIDDEN_LIMIT) {
+            return Err(Self::singular(system, num, 0, 0, k, time));
+        }
+        report.max_hidden = worst;
         // grad1/scale1 (at q1) become the next step's grad0/scale0.
         std::mem::swap(&mut self.grad0, &mut self.grad1);
         std::mem::swap(&mut self.scale0, &mut self.scale1);
         Ok(())
     }
 
-    /// delta ← G(q1) W p (grad1); with `ratio`, the largest squared
-    /// relative hidden residual.
+    /// delta ← G(q1) W p (grad1); with `ratio`, the largest relative hidden
+    /// residual.
     pub(super) fn hidden(
         &mut self,
         system: &ParticleSystem,

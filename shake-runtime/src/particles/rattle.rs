@@ -516,6 +516,7 @@ impl Rattle {
                 &self.num,
                 &self.qn,
                 &mut self.pn,
+                self.options.tol,
                 k,
                 time,
                 report,

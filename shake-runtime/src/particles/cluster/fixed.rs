@@ -3,6 +3,7 @@
 //! loop is unrolled and every array lives in registers or L1.
 
 use super::*;
+use crate::tolerance::{inverse_scale, relative_dot, HIDDEN_LIMIT};
 
 /// Largest ARITY and DIM of a stencil the fixed-size kernel takes.
 pub(super) const FX: usize = 3;
@@ -117,7 +118,6 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
     let (d, ar) = (S::DIM, S::ARITY);
     let wd = ar * d;
     debug_assert!(MC <= 3 && NX == NP * d && ar <= FX && d <= FX);
-    let tol2 = args.tol * args.tol;
     let (m0, p0) = (c * MC, c * NP);
     let members: &[u32; MC] = plan.members[m0..m0 + MC].try_into().unwrap();
     let parts: &[u32; NP] = plan.particles[p0..p0 + NP].try_into().unwrap();
@@ -152,26 +152,26 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
     for j in 0..MC {
         data[j] = table.data(members[j] as usize);
     }
-    // G(x0) and W G(x0) (member blocks, and W G(x0) as dense rows), and the
-    // residual scales 1 / (|∇g_j(x0)|² extent_j²).
+    // G(x0) and W G(x0) (member blocks, and W G(x0) as dense rows).
     let mut g0 = [[0.0; 9]; MC];
     let mut wg0 = [[0.0; 9]; MC];
-    let mut s2 = [0.0; MC];
     let mut xm = [0.0; 9];
     for j in 0..MC {
         gather_fixed::<S, NX>(&sl[j], &x0, &mut xm);
         stencil.gradient(&xm[..wd], data[j], &mut g0[j][..wd]);
-        let mut n2 = 0.0;
         for t in 0..ar {
             for k in 0..d {
-                let v = g0[j][t * d + k];
-                n2 += v * v;
-                wg0[j][t * d + k] = wx[sl[j][t] * d + k] * v;
+                wg0[j][t * d + k] = wx[sl[j][t] * d + k] * g0[j][t * d + k];
             }
         }
-        s2[j] = 1.0 / (n2 * extent2::<S>(&xm[..wd])).max(f64::MIN_POSITIVE);
         scatter_block::<S, NX>(&sl[j], &wg0[j], &mut f.wg0d[j]);
     }
+    // 1 / (|∇g_j| · extent_j) at the iterate the gradients were last
+    // evaluated at (`tolerance::inverse_scale`), that iterate's member
+    // coordinates and extent².
+    let mut inv_s = [0.0; MC];
+    let mut at_s = [[0.0; 9]; MC];
+    let mut e2_s = [0.0; MC];
     let mut nu = [0.0; MC];
     if let (true, Some(st)) = (w.warm, w.store.as_deref()) {
         for m in 0..MC {
@@ -185,33 +185,78 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
     let mut it = 0;
     let mut need_jac = true;
     let mut prev = f64::INFINITY;
+    // The residual is judged against the scale at the iterate judged, never
+    // at x0 alone: from far off M, x0's scale is the far point's and would
+    // pass a result still off M. The scale is taken on the first pass and
+    // kept while no member moves by 1 % of its extent (for a distance, |∇g|
+    // and the extent then change by less than 3 %, which the 0.97 below
+    // covers; a step moves O(h²)); a pass that meets the tolerance after a
+    // larger move takes the scale again, at once when the pass has the
+    // gradients, else on one more pass that evaluates them.
+    let mut rescale = true;
     loop {
+        let fresh = need_jac || fuse;
         let mut worst = 0.0f64;
         let mut worst_j = 0;
         for j in 0..MC {
             gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
-            let g = if need_jac || fuse {
+            let g = if fresh {
                 stencil.gradient(&xm[..wd], data[j], &mut gr[j][..wd])
             } else {
                 stencil.value(&xm[..wd], data[j])
             };
+            if rescale {
+                // (`rescale` is set only with `need_jac`: G is fresh.)
+                let n2: f64 = gr[j][..wd].iter().map(|v| v * v).sum();
+                e2_s[j] = extent2::<S>(&xm[..wd]);
+                inv_s[j] = inverse_scale(n2, e2_s[j]);
+                at_s[j] = xm;
+            }
             gv[j] = g;
-            let r = g * g * s2[j];
+            let r = g.abs() * inv_s[j];
             if !(r <= worst) {
                 worst = r;
                 worst_j = j;
             }
         }
-        if worst <= tol2 {
-            w.max_rel = w.max_rel.max(worst);
-            w.max_it = w.max_it.max(it);
-            w.iters += it as u64;
-            break;
+        if worst <= args.tol {
+            let mut still = |j: usize| {
+                gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
+                let d2: f64 = (0..wd).map(|k| (xm[k] - at_s[j][k]).powi(2)).sum();
+                d2 <= 1e-4 * e2_s[j]
+            };
+            let judged = rescale || (worst <= 0.97 * args.tol && (0..MC).all(&mut still));
+            if !judged && !fresh {
+                (need_jac, rescale) = (true, true);
+                continue;
+            }
+            if !judged {
+                // The gradients of this iterate are in hand: its scale.
+                (worst, worst_j) = (0.0, 0);
+                for j in 0..MC {
+                    gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
+                    let n2: f64 = gr[j][..wd].iter().map(|v| v * v).sum();
+                    e2_s[j] = extent2::<S>(&xm[..wd]);
+                    inv_s[j] = inverse_scale(n2, e2_s[j]);
+                    at_s[j] = xm;
+                    let r = gv[j].abs() * inv_s[j];
+                    if !(r <= worst) {
+                        (worst, worst_j) = (r, j);
+                    }
+                }
+            }
+            if worst <= args.tol {
+                w.max_rel = w.max_rel.max(worst);
+                w.max_it = w.max_it.max(it);
+                w.iters += it as u64;
+                break;
+            }
         }
+        rescale = false;
         if !worst.is_finite() || it >= args.max_iter {
             return Err(ClusterFailure {
                 member: members[worst_j] as usize,
-                residual: worst.sqrt(),
+                residual: worst,
                 iterations: it,
                 kind: if worst.is_finite() {
                     FailureKind::NotConverged
@@ -237,7 +282,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             if !small_inverse(MC, &mut jinv[..MC * MC], false) {
                 return Err(ClusterFailure {
                     member: members[worst_j] as usize,
-                    residual: worst.sqrt(),
+                    residual: worst,
                     iterations: it,
                     kind: FailureKind::SingularNewton,
                 });
@@ -296,24 +341,31 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             axpy_block::<S, NX>(&sl[l], r[l], &gr[l], &mut pl);
         }
         // Hidden constraints after projection, relative to |∇g_j| ·
-        // |velocity of the member's particles| (squared).
+        // |velocity of the member's particles|: above round-off after an
+        // exact solve (or NaN), N is singular to working precision.
         let mut worst = 0.0f64;
+        let mut worst_j = 0;
         for j in 0..MC {
-            let (mut rj, mut v2, mut n2) = (0.0, 0.0, 0.0);
+            let mut v = [0.0; 9];
             for t in 0..ar {
                 for k in 0..d {
                     let i = sl[j][t] * d + k;
-                    let v = wx[i] * pl[i];
-                    let g = gr[j][t * d + k];
-                    rj += g * v;
-                    v2 += v * v;
-                    n2 += g * g;
+                    v[t * d + k] = wx[i] * pl[i];
                 }
             }
-            let rel = rj * rj / (n2 * v2).max(f64::MIN_POSITIVE);
+            let rel = relative_dot(&gr[j][..wd], &v[..wd]);
             if !(rel <= worst) {
                 worst = rel;
+                worst_j = j;
             }
+        }
+        if !(worst <= HIDDEN_LIMIT) {
+            return Err(ClusterFailure {
+                member: members[worst_j] as usize,
+                residual: worst,
+                iterations: it,
+                kind: FailureKind::SingularN,
+            });
         }
         w.max_hidden = w.max_hidden.max(worst);
     }

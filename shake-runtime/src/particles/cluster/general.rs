@@ -3,6 +3,7 @@
 //! each cluster gathered into a local copy and solved by exact Newton.
 
 use super::*;
+use crate::tolerance::{inverse_scale, relative_dot, HIDDEN_LIMIT};
 
 pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
 
@@ -93,22 +94,19 @@ impl Local {
             }
         }
         // The hidden constraints after projection, relative to
-        // |∇g_j| · |velocity of the member's particles| (squared).
+        // |∇g_j| · |velocity of the member's particles|.
         let mut worst = 0.0f64;
         for j in 0..mc {
             let sj = &slots[j * ar..(j + 1) * ar];
             let gj = &self.gr[j * wd..(j + 1) * wd];
-            let (mut r, mut v2, mut n2) = (0.0, 0.0, 0.0);
+            let mut v = [0.0; ML];
             for a in 0..ar {
                 let s = sj[a] as usize;
                 for k in 0..d {
-                    let v = self.wm[s] * self.pl[s * d + k];
-                    r += gj[a * d + k] * v;
-                    v2 += v * v;
-                    n2 += gj[a * d + k] * gj[a * d + k];
+                    v[a * d + k] = self.wm[s] * self.pl[s * d + k];
                 }
             }
-            let rel = r * r / (n2 * v2).max(f64::MIN_POSITIVE);
+            let rel = relative_dot(gj, &v[..wd]);
             if !(rel <= worst) {
                 worst = rel;
             }
@@ -130,7 +128,8 @@ pub(super) struct Work<'a> {
     pub(super) piv: [usize; MAX_CLUSTER],
     pub(super) dinv: [f64; MAX_CLUSTER],
     pub(super) nu: [f64; MAX_CLUSTER],
-    pub(super) s2: [f64; MAX_CLUSTER],
+    /// 1 / (|∇g_j| · extent_j) at the iterate G was last evaluated at.
+    pub(super) inv_s: [f64; MAX_CLUSTER],
     pub(super) x0: [f64; MAX_CLUSTER_COORDS],
     pub(super) max_rel: f64,
     pub(super) max_hidden: f64,
@@ -163,7 +162,7 @@ pub(super) fn shake_one<S: Stencil>(
         piv,
         dinv,
         nu,
-        s2,
+        inv_s,
         x0,
         max_rel,
         max_hidden,
@@ -172,7 +171,6 @@ pub(super) fn shake_one<S: Stencil>(
     } = w;
     let (d, ar) = (S::DIM, S::ARITY);
     let wd = ar * d;
-    let tol2 = args.tol * args.tol;
     let (m0, m1) = (
         plan.member_start[c] as usize,
         plan.member_start[c + 1] as usize,
@@ -192,23 +190,18 @@ pub(super) fn shake_one<S: Stencil>(
         l.pl[s * d..(s + 1) * d].copy_from_slice(&p[i * d..(i + 1) * d]);
         l.wm[s] = args.inv_mass[i];
     }
-    // W G(x0) and the residual scales |∇g_j(x0)|² · extent_j(x0)².
+    // W G(x0).
     for j in 0..mc {
         let sj = &slots[j * ar..(j + 1) * ar];
         gather_member::<S>(sj, &x0[..], &mut l.xm);
         let gr = &mut wg0[j * wd..(j + 1) * wd];
         stencil.gradient(&l.xm[..wd], table.data(members[j] as usize), gr);
-        let mut n2 = 0.0;
         for a in 0..ar {
             let w = l.wm[sj[a] as usize];
             for k in 0..d {
-                let v = gr[a * d + k];
-                n2 += v * v;
-                gr[a * d + k] = w * v;
+                gr[a * d + k] *= w;
             }
         }
-        // 1/scale², so the residual test multiplies.
-        s2[j] = 1.0 / (n2 * extent2::<S>(&l.xm[..wd])).max(f64::MIN_POSITIVE);
         nu[j] = 0.0;
     }
     // Warm start: the previous step's ν (the constraint impulses change
@@ -232,7 +225,12 @@ pub(super) fn shake_one<S: Stencil>(
     let mut need_jac = true;
     let mut prev = f64::INFINITY;
     loop {
-        // g at the current iterate (and G when the Jacobian is due).
+        // g at the current iterate (and G when the Jacobian is due). The
+        // residual is judged against the scale at this iterate, never at
+        // x0 alone: from far off M, x0's scale is the far point's and would
+        // pass a result still off M. A pass on a stale scale (no gradient
+        // here) is confirmed by one pass with the gradients at this iterate.
+        let fresh = need_jac || fuse;
         let mut worst = 0.0f64;
         let mut worst_j = 0;
         for j in 0..mc {
@@ -241,19 +239,27 @@ pub(super) fn shake_one<S: Stencil>(
             let data = table.data(members[j] as usize);
             // With `fuse`, G at every iterate: the last one is G(q1), which
             // the velocity stage needs (no separate evaluation at q1).
-            let g = if need_jac || fuse {
-                stencil.gradient(&l.xm[..wd], data, &mut l.gr[j * wd..(j + 1) * wd])
+            let g = if fresh {
+                let gj = &mut l.gr[j * wd..(j + 1) * wd];
+                let g = stencil.gradient(&l.xm[..wd], data, gj);
+                let n2: f64 = gj.iter().map(|v| v * v).sum();
+                inv_s[j] = inverse_scale(n2, extent2::<S>(&l.xm[..wd]));
+                g
             } else {
                 stencil.value(&l.xm[..wd], data)
             };
             l.g[j] = g;
-            let r = g * g * s2[j];
+            let r = g.abs() * inv_s[j];
             if !(r <= worst) {
                 worst = r;
                 worst_j = j;
             }
         }
-        if worst <= tol2 {
+        if worst <= args.tol {
+            if !fresh {
+                need_jac = true;
+                continue;
+            }
             *max_rel = max_rel.max(worst);
             *max_it = (*max_it).max(it);
             *iters += it as u64;
@@ -262,7 +268,7 @@ pub(super) fn shake_one<S: Stencil>(
         if !worst.is_finite() || it >= args.max_iter {
             return Err(ClusterFailure {
                 member: members[worst_j] as usize,
-                residual: worst.sqrt(),
+                residual: worst,
                 iterations: it,
                 kind: if worst.is_finite() {
                     FailureKind::NotConverged
@@ -301,7 +307,7 @@ pub(super) fn shake_one<S: Stencil>(
             if !ok {
                 return Err(ClusterFailure {
                     member: members[worst_j] as usize,
-                    residual: worst.sqrt(),
+                    residual: worst,
                     iterations: it,
                     kind: FailureKind::SingularNewton,
                 });
@@ -354,12 +360,14 @@ pub(super) fn shake_one<S: Stencil>(
             }
         }
         if fuse {
+            // Above round-off after an exact solve (or NaN), N is singular
+            // to working precision.
             match l.project::<S>(mc, slots) {
-                Some(h) => *max_hidden = max_hidden.max(h),
-                None => {
+                Some(h) if h <= HIDDEN_LIMIT => *max_hidden = max_hidden.max(h),
+                h => {
                     return Err(ClusterFailure {
                         member: members[0] as usize,
-                        residual: f64::NAN,
+                        residual: h.unwrap_or(f64::NAN),
                         iterations: it,
                         kind: FailureKind::SingularN,
                     })

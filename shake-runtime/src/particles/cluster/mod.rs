@@ -18,6 +18,7 @@
 //! its clusters is monomorphic: no dynamic call per member.
 
 use super::{Stencil, Table};
+use crate::tolerance::HIDDEN_LIMIT;
 
 /// Largest number of constraints a cluster may have to be solved on its
 /// own: the order of the small dense solvers' matrices.
@@ -228,7 +229,7 @@ pub(crate) fn shake_clusters<S: Stencil>(
         piv: [0; MAX_CLUSTER],
         dinv: [0.0; MAX_CLUSTER],
         nu: [0.0; MAX_CLUSTER],
-        s2: [0.0; MAX_CLUSTER],
+        inv_s: [0.0; MAX_CLUSTER],
         x0: [0.0; MAX_CLUSTER_COORDS],
         max_rel: 0.0,
         max_hidden: 0.0,
@@ -275,15 +276,18 @@ pub(crate) fn shake_clusters<S: Stencil>(
             }
         }
     }
-    report.max_rel = report.max_rel.max(w.max_rel.sqrt());
-    report.max_hidden = report.max_hidden.max(w.max_hidden.sqrt());
+    report.max_rel = report.max_rel.max(w.max_rel);
+    report.max_hidden = report.max_hidden.max(w.max_hidden);
     report.max_iter = report.max_iter.max(w.max_it);
     report.iterations += w.iters;
     Ok(())
 }
 
 /// The velocity stage (RATTLE's projection onto M^H along the fibre) on
-/// every cluster of one family: p ← p − G(q)ᵀ μ with G(q) M⁻¹ p = 0.
+/// every cluster of one family: p ← p − G(q)ᵀ μ with G(q) M⁻¹ p = 0. A
+/// hidden constraint left above `tolerance::HIDDEN_LIMIT` by the exact
+/// solve, or NaN, means N is singular to working precision: a typed
+/// failure, never a state off M^H returned as projected.
 pub(crate) fn project_clusters<S: Stencil>(
     stencil: &S,
     table: &Table,
@@ -323,11 +327,11 @@ pub(crate) fn project_clusters<S: Stencil>(
             stencil.gradient(&l.xm[..wd], data, &mut l.gr[j * wd..(j + 1) * wd]);
         }
         match l.project::<S>(mc, slots) {
-            Some(h) => max_hidden = max_hidden.max(h),
-            None => {
+            Some(h) if h <= HIDDEN_LIMIT => max_hidden = max_hidden.max(h),
+            h => {
                 return Err(ClusterFailure {
                     member: members[0] as usize,
-                    residual: f64::NAN,
+                    residual: h.unwrap_or(f64::NAN),
                     iterations: 0,
                     kind: FailureKind::SingularN,
                 })
@@ -338,6 +342,6 @@ pub(crate) fn project_clusters<S: Stencil>(
             p[i * d..(i + 1) * d].copy_from_slice(&l.pl[s * d..(s + 1) * d]);
         }
     }
-    report.max_hidden = report.max_hidden.max(max_hidden.sqrt());
+    report.max_hidden = report.max_hidden.max(max_hidden);
     Ok(())
 }
