@@ -1,10 +1,14 @@
-//! What a run may ask for: the start time, the number of steps, the stop
-//! time, h and the stored states are checked together before the first
-//! step, and a request that cannot be met is a typed error carrying the
-//! offending value, never an abort of the process, a loop without end, or
-//! NaN and ∞ among the stored times.
+//! What a run may ask for, on both engines: the start time, the number of
+//! steps, the stop time, h and the stored states are checked together
+//! before the first step, and a request that cannot be met is a typed
+//! error carrying the offending value, never an abort of the process, a
+//! loop without end, or NaN and ∞ among the stored times. With them, the
+//! particle path's tolerance and iteration budget.
 
-use shake_runtime::validate::MAX_STEPS;
+use shake_runtime::particles::{
+    stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle, Table,
+};
+use shake_runtime::validate::{MAX_ITERATIONS, MAX_STEPS, MIN_RELATIVE_TOLERANCE};
 use shake_runtime::{examples::Pendulum, Integrator, State, StepError, Stop, StormerVerlet};
 
 // ---------------------------------------------------------------------------
@@ -112,4 +116,196 @@ fn dense_run_reserves_exactly_the_states_it_stores() {
         .unwrap();
     assert_eq!(traj.steps(), vec![0, 3, 6, 7]);
     assert_eq!(traj.state_bytes(), 4 * 4 * 8);
+}
+
+// ---------------------------------------------------------------------------
+// The particle path
+
+/// A dimer of unit masses and bond length 1 (d = 6), with step size h.
+fn dimer(h: f64, options: Options) -> Result<Rattle, ParticleError> {
+    let mut bonds = Table::new(2, 1);
+    bonds.push(&[0, 1], &[1.0]).unwrap();
+    let system = ParticleSystem::new(3, vec![1.0, 1.0])
+        .unwrap()
+        .with_constraints("bond", Distance::<3>, bonds)
+        .unwrap();
+    Rattle::new(system, h, options)
+}
+
+/// A dimer state on M and M^H; at rest when `moving` is false.
+fn dimer_state(moving: bool) -> ParticleState {
+    let v = if moving { 0.1 } else { 0.0 };
+    ParticleState::new(
+        vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+        vec![0.0, v, 0.0, 0.0, -v, 0.0],
+    )
+}
+
+/// The run was refused before any step: `InvalidInput` with this message
+/// fragment, nothing stored, no step taken.
+fn refused(out: shake_runtime::particles::RunOutcome, state: &ParticleState, what: &str) -> f64 {
+    assert!(
+        out.trajectory.is_empty(),
+        "stored {} states",
+        out.trajectory.len()
+    );
+    assert_eq!((out.summary.steps, state.step()), (0, 0));
+    match out.error {
+        Some(ParticleError::InvalidInput { what: w, value }) if w.contains(what) => value,
+        other => panic!("expected InvalidInput ({what}), got {other:?}"),
+    }
+}
+
+#[test]
+fn particle_run_of_u64_max_steps_is_refused_not_aborted() {
+    // The stored-state count 0 ..= u64::MAX is u64::MAX + 1: it wrapped to
+    // 0, nothing was reserved, and the run grew its buffer until the
+    // allocator aborted the process.
+    let mut rattle = dimer(0.01, Options::default()).unwrap();
+    let mut state = dimer_state(true);
+    let out = rattle.run(&mut state, u64::MAX, 1);
+    assert_eq!(refused(out, &state, "2^53 steps"), u64::MAX as f64);
+    // Without storage too: it would never have returned.
+    let out = rattle.run(&mut state, u64::MAX, 0);
+    assert_eq!(refused(out, &state, "2^53 steps"), u64::MAX as f64);
+}
+
+#[test]
+fn particle_storage_that_does_not_fit_is_a_typed_error() {
+    // 2^53 states of 12 numbers each: counted exactly, refused by the
+    // reservation.
+    let mut rattle = dimer(0.01, Options::default()).unwrap();
+    let mut state = dimer_state(true);
+    let out = rattle.run(&mut state, MAX_STEPS - 1, 1);
+    assert!(out.trajectory.is_empty() && state.step() == 0);
+    assert_eq!(
+        out.error,
+        Some(ParticleError::Storage {
+            step: 0,
+            states: MAX_STEPS,
+            dof: 6
+        })
+    );
+}
+
+#[test]
+fn particle_run_to_far_or_non_finite_stop_time_is_refused() {
+    let mut rattle = dimer(0.01, Options::default()).unwrap();
+    let mut state = dimer_state(true);
+    // 1e302 steps: aborted (stride 1) or never returned (stride 0).
+    for stride in [1, 0] {
+        let out = rattle.run_to(&mut state, 1e300, stride);
+        assert_eq!(refused(out, &state, "more than 2^53 steps"), 1e300);
+    }
+    // NaN and ∞ returned Ok with 0 steps.
+    let out = rattle.run_to(&mut state, f64::NAN, 1);
+    assert!(refused(out, &state, "stop time must be finite").is_nan());
+    for t_end in [f64::INFINITY, f64::NEG_INFINITY] {
+        let out = rattle.run_to(&mut state, t_end, 1);
+        assert_eq!(refused(out, &state, "stop time must be finite"), t_end);
+    }
+    // A reachable stop time still runs.
+    let (traj, summary) = rattle.run_to(&mut state, 0.05, 1).into_result().unwrap();
+    assert_eq!((summary.steps, traj.len()), (5, 6));
+}
+
+#[test]
+fn particle_non_finite_start_time_is_refused() {
+    // Every stored time was NaN (or ∞).
+    for t0 in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let mut rattle = dimer(0.01, Options::default()).unwrap();
+        let mut state = dimer_state(true).with_time(t0);
+        let out = rattle.run(&mut state, 3, 1);
+        let value = refused(out, &state, "start time must be finite");
+        assert!(value.to_bits() == t0.to_bits(), "{value} for {t0}");
+        // A single step refuses it too, and leaves the state alone.
+        match rattle.step(&mut state) {
+            Err(ParticleError::InvalidInput { value, .. }) => assert!(!value.is_finite()),
+            other => panic!("expected InvalidInput, got {other:?}"),
+        }
+        assert_eq!(state.step(), 0);
+    }
+}
+
+#[test]
+fn particle_run_whose_last_time_overflows_is_refused() {
+    // h = f64::MAX, at rest: every step succeeds, and the times were
+    // 0, 1.8e308, ∞, ∞.
+    let mut rattle = dimer(f64::MAX, Options::default()).unwrap();
+    let mut state = dimer_state(false);
+    let out = rattle.run(&mut state, 3, 1);
+    assert_eq!(
+        refused(out, &state, "t0 + k·h of the last step must be finite"),
+        f64::INFINITY
+    );
+    // One step ends at f64::MAX: finite, allowed.
+    let (traj, _) = rattle.run(&mut state, 1, 1).into_result().unwrap();
+    assert_eq!(traj.time(1), f64::MAX);
+}
+
+#[test]
+fn particle_tolerance_below_round_off_is_refused() {
+    // tol = 1e-20 was accepted, and a step iterated to max_iter.
+    for tol in [1e-20, 3.0 * f64::EPSILON, 0.0, f64::NAN] {
+        match dimer(
+            0.01,
+            Options {
+                tol,
+                ..Options::default()
+            },
+        ) {
+            Err(ParticleError::InvalidOption {
+                what: "tol", value, ..
+            }) => {
+                assert_eq!(value.to_bits(), tol.to_bits())
+            }
+            Err(e) => panic!("tol = {tol}: expected InvalidOption, got {e:?}"),
+            Ok(_) => panic!("tol = {tol} was accepted"),
+        }
+    }
+    let tol = MIN_RELATIVE_TOLERANCE;
+    let mut rattle = dimer(
+        0.01,
+        Options {
+            tol,
+            ..Options::default()
+        },
+    )
+    .unwrap();
+    let mut state = dimer_state(true);
+    let (_, summary) = rattle.run(&mut state, 10, 1).into_result().unwrap();
+    assert!(summary.max_rel_g <= tol, "{summary:?}");
+}
+
+#[test]
+fn particle_iteration_budget_is_bounded() {
+    // usize::MAX was accepted: a step that cannot converge never returned.
+    for max_iter in [usize::MAX, MAX_ITERATIONS + 1, 0] {
+        match dimer(
+            0.01,
+            Options {
+                max_iter,
+                ..Options::default()
+            },
+        ) {
+            Err(ParticleError::InvalidOption {
+                what: "max_iter",
+                value,
+                ..
+            }) => {
+                assert_eq!(value, max_iter as f64)
+            }
+            Err(e) => panic!("max_iter = {max_iter}: expected InvalidOption, got {e:?}"),
+            Ok(_) => panic!("max_iter = {max_iter} was accepted"),
+        }
+    }
+    let max_iter = MAX_ITERATIONS;
+    assert!(dimer(
+        0.01,
+        Options {
+            max_iter,
+            ..Options::default()
+        }
+    )
+    .is_ok());
 }
