@@ -3,13 +3,17 @@
 //! before the first step, and a request that cannot be met is a typed
 //! error carrying the offending value, never an abort of the process, a
 //! loop without end, or NaN and ∞ among the stored times. With them, the
-//! particle path's tolerance and iteration budget.
+//! particle path's tolerance and iteration budget, and the fallible
+//! constructors of a dense `State`.
 
+use shake_runtime::nalgebra::DVector;
 use shake_runtime::particles::{
     stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle, Table,
 };
 use shake_runtime::validate::{MAX_ITERATIONS, MAX_STEPS, MIN_RELATIVE_TOLERANCE};
-use shake_runtime::{examples::Pendulum, Integrator, State, StepError, Stop, StormerVerlet};
+use shake_runtime::{
+    examples::Pendulum, Integrator, State, StateError, StepError, Stop, StormerVerlet,
+};
 
 // ---------------------------------------------------------------------------
 // The dense path
@@ -308,4 +312,28 @@ fn particle_iteration_budget_is_bounded() {
         }
     )
     .is_ok());
+}
+
+// ---------------------------------------------------------------------------
+// State
+
+#[test]
+fn state_constructors_have_fallible_forms() {
+    // State::from_slices(&[1.0], &[1.0, 2.0]), State::new and
+    // State::from_vector with an odd length panic; these do not.
+    assert_eq!(
+        State::try_from_slices(&[1.0], &[1.0, 2.0]),
+        Err(StateError::LengthMismatch { q: 1, p: 2 })
+    );
+    assert_eq!(
+        State::try_new(DVector::zeros(3), DVector::zeros(1)),
+        Err(StateError::LengthMismatch { q: 3, p: 1 })
+    );
+    assert_eq!(
+        State::try_from_vector(&DVector::from_vec(vec![1.0, 2.0, 3.0])),
+        Err(StateError::OddLength { len: 3 })
+    );
+    let z = State::try_from_vector(&DVector::from_vec(vec![1.0, 2.0, 3.0, 4.0])).unwrap();
+    assert_eq!(z, State::from_slices(&[1.0, 2.0], &[3.0, 4.0]));
+    assert_eq!(State::try_from_slices(&[], &[]), Ok(State::zeros(0)));
 }
