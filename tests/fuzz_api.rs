@@ -406,6 +406,7 @@ enum Verdict {
 fn kind(e: &StepError) -> &'static str {
     match e {
         StepError::InvalidInput { .. } => "InvalidInput",
+        StepError::Storage { .. } => "Storage",
         StepError::NonFinite { .. } => "NonFinite",
         StepError::NewtonNotConverged { .. } => "NewtonNotConverged",
         StepError::NondegeneracyLost { .. } => "NondegeneracyLost",

@@ -390,7 +390,10 @@ fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
     let msg = e.to_string();
     let nan = f64::NAN;
     let (err, time, residual) = match e {
-        StepError::InvalidInput { .. } => (InvalidInputError::new_err(msg), nan, nan),
+        // (Too many states for memory: the steps and stride asked for.)
+        StepError::InvalidInput { .. } | StepError::Storage { .. } => {
+            (InvalidInputError::new_err(msg), nan, nan)
+        }
         StepError::NonFinite { t, .. } => (NonFiniteError::new_err(msg), *t, nan),
         StepError::NewtonNotConverged { t, source, .. } => {
             let r = match source {

@@ -155,6 +155,19 @@ def test_a_failing_run_raises_with_the_partial_trajectory():
     assert np.abs(r - 1.0).max() <= 1e-12
 
 
+@pytest.mark.parametrize("stride", [1, 2**62])
+def test_a_run_of_more_steps_than_f64_counts_is_refused(stride):
+    # 2**63 steps: stride 1 killed the interpreter (the trajectory grew
+    # until the allocator aborted), stride 2**62 never returned. Beyond
+    # 2**53 the step index k is not exact in f64, nor the times t0 + k*h.
+    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.0, 0.0])
+    with pytest.raises(shake.InvalidInputError) as info:
+        shake.rattle(sys, z0, 0.01, steps=2**63, stride=stride)
+    assert "2^53" in str(info.value)
+    assert info.value.step == 0
+
+
 def test_ensembles_run_every_member():
     sys = shake.models.Pendulum(length=1.0, gravity=9.81)
     z0s = np.array([[np.cos(a), np.sin(a), 0.0, 0.0] for a in np.linspace(-1, 1, 8)])

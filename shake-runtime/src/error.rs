@@ -168,6 +168,19 @@ pub enum StepError {
         /// The offending value.
         value: f64,
     },
+    /// The states a run would store do not fit in memory (or their size
+    /// does not fit in a machine word): refused before the first step, by
+    /// a reservation of the whole trajectory, rather than an abort of the
+    /// process when the buffer grows later.
+    #[error("step {step}: storing {states} states of 2·{dof} numbers each does not fit in memory")]
+    Storage {
+        /// The step the run starts from.
+        step: u64,
+        /// States the run would store.
+        states: u64,
+        /// d (each state holds 2d numbers).
+        dof: usize,
+    },
     /// A state (the input or one computed) has a NaN or infinite entry.
     #[error("non-finite value in the {what} at step {step}, t = {}: entry {entry} of z = (q, p)", human(*.t))]
     NonFinite {
@@ -326,7 +339,8 @@ impl StepError {
     pub fn step(&self) -> u64 {
         match *self {
             StepError::InvalidInput { .. } => 0,
-            StepError::NonFinite { step, .. }
+            StepError::Storage { step, .. }
+            | StepError::NonFinite { step, .. }
             | StepError::NewtonNotConverged { step, .. }
             | StepError::SingularShakeJacobian { step, .. }
             | StepError::SingularNondegeneracyMatrix { step, .. }
@@ -339,7 +353,7 @@ impl StepError {
     }
 
     /// The time t0 + k·h of the state the failing step k was computing
-    /// (`None` for input errors, found before any step).
+    /// (`None` for input and storage errors, found before any step).
     ///
     /// ```
     /// use shake_runtime::StepError;
@@ -348,7 +362,7 @@ impl StepError {
     /// ```
     pub fn time(&self) -> Option<f64> {
         match *self {
-            StepError::InvalidInput { .. } => None,
+            StepError::InvalidInput { .. } | StepError::Storage { .. } => None,
             StepError::NonFinite { t, .. }
             | StepError::NewtonNotConverged { t, .. }
             | StepError::SingularShakeJacobian { t, .. }
@@ -376,7 +390,7 @@ impl StepError {
     /// are, and every caller of them passes the step's own k and t0 + k·h.
     pub(crate) fn at(mut self, step_index: u64, time: f64) -> Self {
         match &mut self {
-            StepError::InvalidInput { .. } => {}
+            StepError::InvalidInput { .. } | StepError::Storage { .. } => {}
             StepError::NonFinite { step, t, .. }
             | StepError::NewtonNotConverged { step, t, .. }
             | StepError::SingularShakeJacobian { step, t, .. }

@@ -128,6 +128,6 @@ pub use nalgebra;
 pub use newton::NewtonOptions;
 /// Re-exported for [`ensemble()`]: its thread pools.
 pub use rayon;
-pub use state::State;
+pub use state::{State, StateError};
 pub use system::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, SizeVisitor};
 pub use unconstrained::Unconstrained;

@@ -18,8 +18,41 @@ pub struct State {
     pub p: DVector<f64>,
 }
 
+/// Why numbers given for a [`State`] do not make one: z = (q, p) needs
+/// q and p of the same length d.
+///
+/// ```
+/// use shake_runtime::{State, StateError};
+/// let e = State::try_from_slices(&[1.0], &[1.0, 2.0]).unwrap_err();
+/// assert_eq!(e, StateError::LengthMismatch { q: 1, p: 2 });
+/// assert_eq!(e.to_string(), "q has 1 entries and p has 2: a state needs both of length d");
+/// ```
+#[derive(Copy, Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum StateError {
+    /// q and p have different lengths.
+    #[error("q has {q} entries and p has {p}: a state needs both of length d")]
+    LengthMismatch {
+        /// q's length.
+        q: usize,
+        /// p's length.
+        p: usize,
+    },
+    /// z = (q, p) as one vector has an odd length.
+    #[error("z has {len} entries: z = (q, p) needs an even number 2d")]
+    OddLength {
+        /// z's length.
+        len: usize,
+    },
+}
+
 impl State {
     /// A state from its two halves (of equal length).
+    ///
+    /// # Panics
+    ///
+    /// When q and p have different lengths (a programmer's error when the
+    /// lengths are fixed in the code); for lengths that come from data use
+    /// [`try_new`](Self::try_new), which returns a [`StateError`].
     ///
     /// ```
     /// use shake_runtime::{State, nalgebra::DVector};
@@ -31,7 +64,33 @@ impl State {
         State { q, p }
     }
 
+    /// [`new`](Self::new) without the panic: q and p of different lengths
+    /// are [`StateError::LengthMismatch`].
+    ///
+    /// ```
+    /// use shake_runtime::{State, StateError, nalgebra::DVector};
+    /// let q = DVector::from_vec(vec![1.0]);
+    /// let z = State::try_new(q.clone(), DVector::from_vec(vec![2.0])).unwrap();
+    /// assert_eq!(z.p[0], 2.0);
+    /// let e = State::try_new(q, DVector::zeros(3)).unwrap_err();
+    /// assert_eq!(e, StateError::LengthMismatch { q: 1, p: 3 });
+    /// ```
+    pub fn try_new(q: DVector<f64>, p: DVector<f64>) -> Result<Self, StateError> {
+        if q.len() != p.len() {
+            return Err(StateError::LengthMismatch {
+                q: q.len(),
+                p: p.len(),
+            });
+        }
+        Ok(State { q, p })
+    }
+
     /// A state copied from two slices of equal length.
+    ///
+    /// # Panics
+    ///
+    /// When the slices have different lengths; for slices that come from
+    /// data use [`try_from_slices`](Self::try_from_slices).
     ///
     /// ```
     /// let z = shake_runtime::State::from_slices(&[0.0, -1.0], &[1.0, 0.0]);
@@ -39,6 +98,29 @@ impl State {
     /// ```
     pub fn from_slices(q: &[f64], p: &[f64]) -> Self {
         State::new(DVector::from_column_slice(q), DVector::from_column_slice(p))
+    }
+
+    /// [`from_slices`](Self::from_slices) without the panic: slices of
+    /// different lengths are [`StateError::LengthMismatch`] (checked
+    /// before anything is copied).
+    ///
+    /// ```
+    /// use shake_runtime::{State, StateError};
+    /// let z = State::try_from_slices(&[0.0, -1.0], &[1.0, 0.0]).unwrap();
+    /// assert_eq!(z.q[1], -1.0);
+    /// assert_eq!(
+    ///     State::try_from_slices(&[1.0], &[1.0, 2.0]),
+    ///     Err(StateError::LengthMismatch { q: 1, p: 2 })
+    /// );
+    /// ```
+    pub fn try_from_slices(q: &[f64], p: &[f64]) -> Result<Self, StateError> {
+        if q.len() != p.len() {
+            return Err(StateError::LengthMismatch {
+                q: q.len(),
+                p: p.len(),
+            });
+        }
+        Ok(State::from_slices(q, p))
     }
 
     /// The origin of R^{2d}.
@@ -75,6 +157,11 @@ impl State {
 
     /// The state with z = (q, p) given as one vector of even length.
     ///
+    /// # Panics
+    ///
+    /// When z has an odd length; for a z that comes from data use
+    /// [`try_from_vector`](Self::try_from_vector).
+    ///
     /// ```
     /// use shake_runtime::{State, nalgebra::DVector};
     /// let z = State::from_vector(&DVector::from_vec(vec![1.0, 2.0]));
@@ -84,6 +171,23 @@ impl State {
         assert!(z.len() & 1 == 0, "z must have even length 2d");
         let d = z.len() / 2;
         State::from_slices(&z.as_slice()[..d], &z.as_slice()[d..])
+    }
+
+    /// [`from_vector`](Self::from_vector) without the panic: an odd length
+    /// is [`StateError::OddLength`].
+    ///
+    /// ```
+    /// use shake_runtime::{State, StateError, nalgebra::DVector};
+    /// let z = State::try_from_vector(&DVector::from_vec(vec![1.0, 2.0])).unwrap();
+    /// assert_eq!((z.q[0], z.p[0]), (1.0, 2.0));
+    /// let odd = DVector::from_vec(vec![1.0, 2.0, 3.0]);
+    /// assert_eq!(State::try_from_vector(&odd), Err(StateError::OddLength { len: 3 }));
+    /// ```
+    pub fn try_from_vector(z: &DVector<f64>) -> Result<Self, StateError> {
+        if !z.len().is_multiple_of(2) {
+            return Err(StateError::OddLength { len: z.len() });
+        }
+        Ok(State::from_vector(z))
     }
 
     /// True when every entry is finite.

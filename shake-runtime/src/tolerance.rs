@@ -4,8 +4,125 @@
 //! relative to g_i's own size ‖∂g_i/∂z‖₁ and to the size of the variables
 //! it reads. Pure arithmetic on numbers and patterns, used by the kernels,
 //! the guard and the API checks alike.
+//!
+//! With them, the other limits f64 puts on a computation, shared by both
+//! engines (the dense [`Integrator`](crate::Integrator) and the particle
+//! [`Rattle`](crate::particles::Rattle)): the smallest relative tolerance
+//! a residual can meet, the largest Newton budget, and what a run may ask
+//! for ([`check_run`], [`stored_states`]).
+
+use std::num::NonZeroU64;
 
 use crate::linalg::norm_inf;
+
+/// The smallest relative residual tolerance accepted: 4ε.
+///
+/// A relative residual such as | |r| − ℓ | / ℓ is computed in f64 at a
+/// state whose every coordinate is already rounded: rounding the
+/// coordinates to their nearest f64 moves |r| by up to about ε/2 relative,
+/// and evaluating g (a difference of coordinates, squares, a sum, the
+/// subtraction of ℓ²) adds a few more roundings of ε/2 each. The nearest
+/// state to M that f64 can hold therefore shows a residual of order ε, and
+/// a tolerance below that may never be met: Newton would iterate on the
+/// rounding noise until its budget runs out. 4ε leaves a factor of two
+/// above the ≈ 2ε that rounding alone can produce.
+pub const MIN_RELATIVE_TOLERANCE: f64 = 4.0 * f64::EPSILON;
+
+/// The largest Newton iteration budget accepted (per solve: per step, or
+/// per cluster and step on the particle path). Newton from a point at
+/// distance O(h) converges in a handful of iterations; one that has not
+/// converged after this many will not, and a larger budget only turns a
+/// failure into a hang.
+pub const MAX_ITERATIONS: usize = 10_000;
+
+/// The most steps one run may take, counted as the index of its last step:
+/// 2⁵³. Up to it every step index k is exact in f64, so the times
+/// t0 + k·h are computed from the exact k; beyond it k + 1 rounds to k, the
+/// stored times repeat and a run cannot be told apart from a shorter one
+/// (and would not end in any useful time).
+pub const MAX_STEPS: u64 = 1 << 53;
+
+/// Why a run's request was refused before any step: what is wrong and the
+/// value (each engine turns it into its own `InvalidInput`).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) enum RunLimit {
+    /// The start time t0 is NaN or infinite.
+    StartTime(f64),
+    /// The last step index first + steps is past [`MAX_STEPS`] (or does not
+    /// fit in a u64): the steps asked for.
+    Steps(u64),
+    /// The time of the last step, t0 + last·h, is NaN or infinite.
+    EndTime(f64),
+}
+
+impl RunLimit {
+    /// What is wrong, for a message.
+    pub(crate) fn what(&self) -> &'static str {
+        match self {
+            RunLimit::StartTime(_) => "start time must be finite",
+            RunLimit::Steps(_) => {
+                "a run takes at most 2^53 steps (step indices beyond are not exact in f64)"
+            }
+            RunLimit::EndTime(_) => "the time t0 + k·h of the last step must be finite",
+        }
+    }
+
+    /// The offending value.
+    pub(crate) fn value(&self) -> f64 {
+        match *self {
+            RunLimit::StartTime(t) | RunLimit::EndTime(t) => t,
+            RunLimit::Steps(n) => n as f64,
+        }
+    }
+}
+
+/// Checks a run of `steps` steps from step index `first` (at time
+/// t0 + first·h, t0 the run's start) with step size h, as the engines
+/// compute their times (t0 + k·h from the exact k, never accumulated):
+/// t0 finite, the last index first + steps at most [`MAX_STEPS`], and the
+/// last time finite. Since t0 + k·h lies between t0 and the last time for
+/// every k in between, the two finite ends make every stored time finite.
+/// Returns the last step index. h itself is the engine's check (each has
+/// its own rule for its sign).
+pub(crate) fn check_run(t0: f64, h: f64, first: u64, steps: u64) -> Result<u64, RunLimit> {
+    if !t0.is_finite() {
+        return Err(RunLimit::StartTime(t0));
+    }
+    let last = match first.checked_add(steps) {
+        Some(last) if last <= MAX_STEPS => last,
+        _ => return Err(RunLimit::Steps(steps)),
+    };
+    let end = t0 + last as f64 * h;
+    if !end.is_finite() {
+        return Err(RunLimit::EndTime(end));
+    }
+    Ok(last)
+}
+
+/// How many states a run from step index `first` to `last` stores: every
+/// k in first ..= last that is a multiple of `stride`, and the last one
+/// too when `keep_last` (the dense driver's rule: first, every stride-th,
+/// last). `None` when the count does not fit in a u64 (checked, never
+/// wrapped: a wrapped count would reserve nothing and the run would then
+/// grow its buffer until the allocator aborts the process).
+///
+/// Both engines reserve their trajectory from this count before the first
+/// step, and refuse the run with a typed storage error when the
+/// reservation fails.
+pub(crate) fn stored_states(
+    first: u64,
+    last: u64,
+    stride: NonZeroU64,
+    keep_last: bool,
+) -> Option<u64> {
+    if last < first {
+        return Some(0);
+    }
+    let s = stride.get();
+    (last / s - first / s)
+        .checked_add(u64::from(first.is_multiple_of(s)))?
+        .checked_add(u64::from(keep_last && !last.is_multiple_of(s)))
+}
 
 /// ‖∂g_i/∂z‖₁ for each i, from g_z (m × 2d, column-major) over the
 /// system's pattern of structurally nonzero entries.
@@ -242,3 +359,60 @@ fn relative_dot_scaled(a: &[f64], b: &[f64]) -> f64 {
 /// 1e-300 left 0.1). The Newton tolerance of the positions does not enter:
 /// it bounds an iteration, and this is a linear solve.
 pub(crate) const HIDDEN_LIMIT: f64 = 1.4901161193847656e-8;
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn nz(s: u64) -> NonZeroU64 {
+        NonZeroU64::new(s).unwrap()
+    }
+
+    #[test]
+    fn stored_states_counts_first_every_stride_th_and_last() {
+        // (first, last, stride, keep_last) → count
+        let table = [
+            ((0, 0, 1, true), 1),
+            ((0, 7, 3, true), 4),     // 0, 3, 6, 7
+            ((0, 6, 3, true), 3),     // 0, 3, 6
+            ((0, 7, 3, false), 3),    // 0, 3, 6
+            ((5, 15, 10, false), 1),  // 10
+            ((10, 20, 10, false), 2), // 10, 20
+            ((0, u64::MAX - 1, 1, false), u64::MAX),
+        ];
+        for ((first, last, s, keep), want) in table {
+            assert_eq!(stored_states(first, last, nz(s), keep), Some(want));
+        }
+        // One more than u64::MAX states: refused, not wrapped to 0.
+        assert_eq!(stored_states(0, u64::MAX, nz(1), false), None);
+    }
+
+    #[test]
+    fn check_run_refuses_each_limit_with_its_value() {
+        assert_eq!(check_run(0.0, 0.1, 0, 3), Ok(3));
+        assert!(
+            matches!(check_run(f64::NAN, 0.1, 0, 3), Err(RunLimit::StartTime(t)) if t.is_nan())
+        );
+        assert_eq!(
+            check_run(f64::INFINITY, 0.1, 0, 3),
+            Err(RunLimit::StartTime(f64::INFINITY))
+        );
+        assert_eq!(check_run(0.0, 0.1, 0, MAX_STEPS), Ok(MAX_STEPS));
+        assert_eq!(
+            check_run(0.0, 0.1, 1, MAX_STEPS),
+            Err(RunLimit::Steps(MAX_STEPS))
+        );
+        assert_eq!(
+            check_run(0.0, 0.1, 1, u64::MAX),
+            Err(RunLimit::Steps(u64::MAX))
+        );
+        assert_eq!(
+            check_run(0.0, f64::MAX, 0, 3),
+            Err(RunLimit::EndTime(f64::INFINITY))
+        );
+        assert_eq!(
+            check_run(0.0, -f64::MAX, 0, 2),
+            Err(RunLimit::EndTime(f64::NEG_INFINITY))
+        );
+        assert_eq!(check_run(0.0, f64::MAX, 0, 1), Ok(1));
+    }
+}

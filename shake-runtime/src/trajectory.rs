@@ -10,9 +10,12 @@
 //! as separate heap vectors it took about 140).
 
 use crate::diagnostics::DiagnosticRecord;
+use crate::error::StepError;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
+use crate::tolerance::{check_run, stored_states};
 use std::borrow::Cow;
+use std::num::NonZeroU64;
 use std::sync::Arc;
 
 /// The stored states of a run: state `i` at step [`step(i)`](Self::step),
@@ -126,6 +129,52 @@ impl Trajectory {
         }
     }
 
+    /// The empty trajectory of a run of `n` steps of size h from t0 with
+    /// stride s, of states with d = `dof` coordinates and columns called
+    /// `names`, with the multipliers of `diagnostics` = Some(m)
+    /// constraints, after the checks of the run's extent the particle path
+    /// makes too: the start time, the number of steps and the last time
+    /// t0 + n·h together ([`StepError::InvalidInput`]: every time the run
+    /// stores is then finite), and, when it stores, exactly its states
+    /// (0, s, 2s, … and the last; a failing run stores at most its last
+    /// good state off the stride, never more) counted without overflow and
+    /// reserved ([`StepError::Storage`]): what cannot be stored is refused
+    /// before the first step, not an abort of the process when the buffer
+    /// grows. `stride` is at least 1 (the driver refuses 0 before).
+    pub(crate) fn for_run(
+        (dof, names): (usize, Names),
+        diagnostics: Option<usize>,
+        t0: f64,
+        h: f64,
+        n: u64,
+        stride: u64,
+        store: bool,
+    ) -> Result<Self, StepError> {
+        check_run(t0, h, 0, n).map_err(|l| StepError::InvalidInput {
+            what: l.what(),
+            value: l.value(),
+        })?;
+        let mut traj = Trajectory::new(dof, t0, h, stride, 0);
+        traj.set_names(names);
+        if let Some(m) = diagnostics {
+            traj.set_constraints(m);
+        }
+        if store {
+            let s = NonZeroU64::new(stride).unwrap_or(NonZeroU64::MIN);
+            let states = stored_states(0, n, s, true);
+            let keep = diagnostics.is_some();
+            if states.is_none_or(|k| traj.try_reserve(k, keep).is_err()) {
+                let states = states.unwrap_or(u64::MAX);
+                return Err(StepError::Storage {
+                    step: 0,
+                    states,
+                    dof,
+                });
+            }
+        }
+        Ok(traj)
+    }
+
     /// Names the columns as `names` does.
     pub(crate) fn set_names(&mut self, names: Names) {
         self.names = Some(Arc::new(names));
@@ -184,9 +233,21 @@ impl Trajectory {
         self.constraints
     }
 
-    /// Room for the multipliers of `records` diagnostic records.
-    pub(crate) fn reserve_multipliers(&mut self, records: usize) {
-        self.multipliers.reserve(2 * self.constraints * records);
+    /// Room for `states` more states, and with `diagnostics` for their
+    /// records and multipliers (set the constraints first): `Err` when a
+    /// size overflows a machine word or the allocator refuses.
+    fn try_reserve(&mut self, states: u64, diagnostics: bool) -> Result<(), ()> {
+        let states = usize::try_from(states).map_err(|_| ())?;
+        let numbers = states.checked_mul(2 * self.dof).ok_or(())?;
+        self.data.try_reserve_exact(numbers).map_err(|_| ())?;
+        if diagnostics {
+            let multipliers = states.checked_mul(2 * self.constraints).ok_or(())?;
+            self.diagnostics.try_reserve_exact(states).map_err(|_| ())?;
+            self.multipliers
+                .try_reserve_exact(multipliers)
+                .map_err(|_| ())?;
+        }
+        Ok(())
     }
 
     /// Appends the multipliers of the next diagnostic record: λ unknown

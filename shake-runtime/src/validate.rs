@@ -5,8 +5,12 @@
 //!
 //! What is checked and why:
 //! - the step size h: finite and nonzero (a step of 0 or ∞ has no meaning);
-//! - the start time t0 and a stop time: finite (the times t0 + k·h stored
-//!   with the trajectory would be NaN);
+//! - a run's start time t0, its number of steps and the time of its last
+//!   step, together (`tolerance::check_run`, shared with the particle
+//!   path): t0 finite, at most [`MAX_STEPS`] steps, t0 + n·h finite (the
+//!   times stored with the trajectory would be NaN or ∞), and the states it
+//!   stores counted without wrapping and reserved before the first step
+//!   ([`StepError::Storage`] when they do not fit);
 //! - [`Options`]: every tolerance finite where a finite value is meant and of
 //!   the right sign, and the Newton iteration bounded. The stopping rule of
 //!   every Newton iteration (see [`newton`](crate::newton)) guarantees a
@@ -32,9 +36,10 @@ use crate::{Options, StepError};
 /// Newton iteration may stop on a point visibly off M.
 pub const MAX_STEP_TOLERANCE: f64 = 1e-8;
 
-/// The largest accepted `NewtonOptions::max_iterations`: a Newton iteration
-/// that has not converged after this many steps will not.
-pub const MAX_ITERATIONS: usize = 10_000;
+/// The largest accepted `NewtonOptions::max_iterations` (and particle
+/// `Options::max_iter`), the most steps of one run, and the smallest
+/// relative tolerance of the particle path: limits both engines share.
+pub use crate::tolerance::{MAX_ITERATIONS, MAX_STEPS, MIN_RELATIVE_TOLERANCE};
 
 fn invalid(what: &'static str, value: f64) -> StepError {
     StepError::InvalidInput { what, value }

@@ -117,6 +117,11 @@ fn every_error_round_trips() {
             t: 0.45,
             iterations: 3,
         },
+        StepError::Storage {
+            step: 0,
+            states: u64::MAX,
+            dof: 6,
+        },
         StepError::SingularNondegeneracyMatrix {
             stage: Stage::Rattle,
             step: 2,

@@ -126,6 +126,17 @@ pub enum ParticleError {
         /// The step size given.
         h: f64,
     },
+    /// A run's request is unusable: a start time or stop time that is NaN
+    /// or infinite, more than [`MAX_STEPS`](crate::validate::MAX_STEPS)
+    /// steps, or a last time t0 + k·h that is not finite (every stored
+    /// time would be NaN or ∞). Found before any step.
+    #[error("invalid input: {what} (value {value:e})")]
+    InvalidInput {
+        /// What is wrong.
+        what: &'static str,
+        /// The offending value.
+        value: f64,
+    },
     /// A state's arrays do not have n·D entries.
     #[error("{what} has {got} entries, the system has {expected} coordinates")]
     Shape {
@@ -136,8 +147,9 @@ pub enum ParticleError {
         /// n·D.
         expected: usize,
     },
-    /// An option is out of its range (a tolerance not in (0, 1), an
-    /// iteration budget of 0).
+    /// An option is out of its range (a tolerance not in
+    /// [4ε, 1), an iteration budget not in 1 ..= 10 000; see
+    /// [`Options`](super::Options)).
     #[error("option {what} = {value} is not allowed: {why}")]
     InvalidOption {
         /// The option.

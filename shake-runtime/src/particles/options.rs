@@ -2,6 +2,9 @@
 //! method, the solver for the multipliers' linear systems, the tolerances
 //! ([`Options`]) and the per-step [`StepReport`].
 
+use super::ParticleError;
+use crate::tolerance::{MAX_ITERATIONS, MIN_RELATIVE_TOLERANCE};
+
 /// SHAKE (positions constrained, momenta as Störmer–Verlet leaves them) or
 /// RATTLE (momenta projected onto M^H as well).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
@@ -42,14 +45,53 @@ pub struct Options {
     /// Every constraint's relative residual |g_k(q1)| / (|∇g_k(q0)| ·
     /// extent_k(q0)) must end ≤ tol (extent_k² = Σ_a |x_a − x̄|² over the
     /// member's particles; for a distance constraint this is
-    /// ≈ | |r| − l | / l).
+    /// ≈ | |r| − l | / l). In [4ε, 1): below
+    /// [`MIN_RELATIVE_TOLERANCE`](crate::validate::MIN_RELATIVE_TOLERANCE)
+    /// = 4ε rounding alone can keep the residual above the tolerance, and
+    /// Newton would spend its whole budget on rounding noise.
     pub tol: f64,
-    /// Newton iterations allowed per step (per cluster on the cluster path).
+    /// Newton iterations allowed per step (per cluster on the cluster
+    /// path), in 1 ..= [`MAX_ITERATIONS`](crate::validate::MAX_ITERATIONS)
+    /// = 10 000: Newton converges in a few iterations or not at all, and a
+    /// larger budget only makes a failing step hang.
     pub max_iter: usize,
     /// SHAKE or RATTLE.
     pub method: Method,
     /// The linear solver.
     pub solver: SolverChoice,
+}
+
+impl Options {
+    /// `Ok` when every option is in its documented range, else
+    /// [`ParticleError::InvalidOption`] naming it and its value.
+    /// [`Rattle::new`](super::Rattle::new) calls it.
+    ///
+    /// ```
+    /// use shake_runtime::particles::{Options, ParticleError};
+    /// assert!(Options::default().validate().is_ok());
+    /// let tiny = Options { tol: 1e-20, ..Options::default() };
+    /// assert!(matches!(
+    ///     tiny.validate(),
+    ///     Err(ParticleError::InvalidOption { what: "tol", value, .. }) if value == 1e-20
+    /// ));
+    /// ```
+    pub fn validate(&self) -> Result<(), ParticleError> {
+        if !(self.tol >= MIN_RELATIVE_TOLERANCE && self.tol < 1.0) {
+            return Err(ParticleError::InvalidOption {
+                what: "tol",
+                value: self.tol,
+                why: "the relative residual tolerance must lie in [4ε, 1) (4ε ≈ 8.9e-16: below it f64 rounding alone can keep the residual above the tolerance)",
+            });
+        }
+        if self.max_iter == 0 || self.max_iter > MAX_ITERATIONS {
+            return Err(ParticleError::InvalidOption {
+                what: "max_iter",
+                value: self.max_iter as f64,
+                why: "the Newton iteration budget must lie in 1 ..= 10000",
+            });
+        }
+        Ok(())
+    }
 }
 
 impl Default for Options {

@@ -67,27 +67,15 @@ pub struct Rattle {
 }
 
 impl Rattle {
-    /// The symbolic phase. Refuses h not finite or ≤ 0, a cluster with more
+    /// The symbolic phase. Refuses h not finite or ≤ 0, options out of
+    /// their range ([`Options::validate`]), a cluster with more
     /// constraints than coordinates, and a forced solver that cannot take
     /// the graph.
     pub fn new(system: ParticleSystem, h: f64, options: Options) -> Result<Self, ParticleError> {
         if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
             return Err(ParticleError::StepSize { h });
         }
-        if !(options.tol > 0.0 && options.tol < 1.0) {
-            return Err(ParticleError::InvalidOption {
-                what: "tol",
-                value: options.tol,
-                why: "the relative residual tolerance must lie in (0, 1)",
-            });
-        }
-        if options.max_iter == 0 {
-            return Err(ParticleError::InvalidOption {
-                what: "max_iter",
-                value: 0.0,
-                why: "at least one Newton iteration is needed",
-            });
-        }
+        options.validate()?;
         let num = Numbering::new(&system);
         let comps = graph::components(&system, &num)?;
         let m = system.constraints();
@@ -317,6 +305,14 @@ impl Rattle {
         self.check_shape(state)?;
         let k = state.step + 1;
         let time = state.t0 + k as f64 * self.h;
+        // A NaN or infinite t0, or t0 + k·h past f64's range, would be
+        // stamped on the state and on every error from here on.
+        if !time.is_finite() {
+            return Err(ParticleError::InvalidInput {
+                what: "the step's time t0 + k·h must be finite",
+                value: time,
+            });
+        }
         let (h, half) = (self.h, 0.5 * self.h);
         let d = self.system.dim();
         let continued = state.stamp != 0 && state.stamp == self.stamp;

@@ -1,7 +1,10 @@
 //! The driver: many steps, a stride, one contiguous trajectory, and the
 //! partial trajectory on failure.
 
+use std::num::NonZeroU64;
+
 use super::{ParticleError, ParticleState, Rattle, Trajectory};
+use crate::tolerance::{check_run, stored_states, MAX_STEPS};
 
 /// What a run measured over its steps.
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
@@ -50,8 +53,15 @@ impl Rattle {
     /// error carries k and t0 + k·h, `state` is left at step k − 1, and the
     /// trajectory holds the states stored up to k − 1.
     ///
+    /// Before any step the request is checked as a whole, as the dense
+    /// driver checks its own: the start time finite, the last step index at
+    /// most [`MAX_STEPS`](crate::validate::MAX_STEPS) and its time
+    /// t0 + k·h finite ([`ParticleError::InvalidInput`]), and the states to
+    /// store counted without overflow and reserved
+    /// ([`ParticleError::Storage`] when they do not fit).
+    ///
     /// ```
-    /// use shake_runtime::particles::{generate, Options, Rattle};
+    /// use shake_runtime::particles::{generate, Options, ParticleError, Rattle};
     /// let (system, mut state) = generate::chain(20, 7).unwrap();
     /// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();
@@ -60,38 +70,60 @@ impl Rattle {
     /// let (traj, summary) = out.into_result().unwrap();
     /// assert_eq!((traj.len(), traj.step(10)), (11, 100));
     /// assert!(summary.max_rel_g <= 1e-10);
+    /// // More steps than f64 can count exactly: refused before the first.
+    /// let out = rattle.run(&mut state, u64::MAX, 1);
+    /// assert!(matches!(out.error, Some(ParticleError::InvalidInput { .. })));
+    /// assert_eq!(state.step(), 100);
     /// ```
     pub fn run(&mut self, state: &mut ParticleState, steps: u64, stride: u64) -> RunOutcome {
         let mut trajectory = Trajectory::new(state.q.len());
-        let mut summary = RunSummary::default();
-        if let Some(s) = std::num::NonZeroU64::new(stride) {
-            let first = state.step;
-            let at_start = first.is_multiple_of(s.get());
+        let summary = RunSummary::default();
+        let refuse = |trajectory, e| RunOutcome {
+            trajectory,
+            summary,
+            error: Some(e),
+        };
+        let first = state.step;
+        let last = match check_run(state.t0, self.step_size(), first, steps) {
+            Ok(last) => last,
+            Err(l) => {
+                let e = ParticleError::InvalidInput {
+                    what: l.what(),
+                    value: l.value(),
+                };
+                return refuse(trajectory, e);
+            }
+        };
+        if let Some(s) = NonZeroU64::new(stride) {
             // Reserved up front (no allocation per step); a request that
             // cannot be stored is a typed error before the first step, not
             // an abort of the process after hours.
-            let stored = first
-                .checked_add(steps)
-                .map(|last| last / s - first / s + u64::from(at_start));
-            let room = match stored {
-                Some(n) => trajectory.try_reserve(n).is_ok(),
-                None => false,
-            };
-            if !room {
-                return RunOutcome {
-                    trajectory,
-                    summary,
-                    error: Some(ParticleError::Storage {
-                        step: first,
-                        states: stored.unwrap_or(u64::MAX),
-                        dof: state.q.len(),
-                    }),
+            let stored = stored_states(first, last, s, false);
+            if stored.is_none_or(|n| trajectory.try_reserve(n).is_err()) {
+                let e = ParticleError::Storage {
+                    step: first,
+                    states: stored.unwrap_or(u64::MAX),
+                    dof: state.q.len(),
                 };
+                return refuse(trajectory, e);
             }
-            if at_start {
+            if first.is_multiple_of(s.get()) {
                 trajectory.push(state);
             }
         }
+        self.run_checked(state, steps, stride, trajectory)
+    }
+
+    /// The loop of [`run`](Self::run), once the request is checked and the
+    /// trajectory reserved.
+    fn run_checked(
+        &mut self,
+        state: &mut ParticleState,
+        steps: u64,
+        stride: u64,
+        mut trajectory: Trajectory,
+    ) -> RunOutcome {
+        let mut summary = RunSummary::default();
         for _ in 0..steps {
             match self.step(state) {
                 Ok(r) => {
@@ -121,15 +153,41 @@ impl Rattle {
         }
     }
 
-    /// Runs from `state` to time `t_end` (the number of steps is
-    /// round((t_end − t)/h); `t_end` before `t` takes none).
+    /// Runs from `state` to time `t_end`: round((t_end − t)/h) steps, none
+    /// when `t_end` is before `t`. A `t_end` that is NaN or infinite, or
+    /// more than [`MAX_STEPS`](crate::validate::MAX_STEPS) steps away, is
+    /// refused with [`ParticleError::InvalidInput`] carrying `t_end`; the
+    /// rest is checked as [`run`](Self::run) checks it.
+    ///
+    /// ```
+    /// use shake_runtime::particles::{generate, Options, ParticleError, Rattle};
+    /// let (system, mut state) = generate::chain(4, 7).unwrap();
+    /// let mut rattle = Rattle::new(system, 0.5, Options::default()).unwrap();
+    /// rattle.project(&mut state).unwrap();
+    /// let (traj, _) = rattle.run_to(&mut state, 2.0, 1).into_result().unwrap();
+    /// assert_eq!(traj.time(4), 2.0);
+    /// let out = rattle.run_to(&mut state, f64::NAN, 1);
+    /// assert!(matches!(out.error, Some(ParticleError::InvalidInput { value, .. }) if value.is_nan()));
+    /// ```
     pub fn run_to(&mut self, state: &mut ParticleState, t_end: f64, stride: u64) -> RunOutcome {
         let n = ((t_end - state.time) / self.step_size()).round();
-        let steps = if n.is_finite() && n > 0.0 {
-            n as u64
+        let refused = if !t_end.is_finite() {
+            Some("stop time must be finite")
+        } else if n > MAX_STEPS as f64 {
+            Some("stop time needs more than 2^53 steps of size h")
         } else {
-            0
+            None
         };
+        if let Some(what) = refused {
+            return RunOutcome {
+                trajectory: Trajectory::new(state.q.len()),
+                summary: RunSummary::default(),
+                error: Some(ParticleError::InvalidInput { what, value: t_end }),
+            };
+        }
+        // (n ≤ 2^53 here, or NaN from a NaN start time, which `run`
+        // refuses: the cast is exact or 0.)
+        let steps = if n > 0.0 { n as u64 } else { 0 };
         self.run(state, steps, stride)
     }
 }

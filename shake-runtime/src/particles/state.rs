@@ -37,7 +37,10 @@ impl ParticleState {
         }
     }
 
-    /// The same state at step 0 and time t0 (the run's start).
+    /// The same state at step 0 and time t0 (the run's start). A t0 that
+    /// is NaN or infinite is refused by [`Rattle::step`](super::Rattle::step)
+    /// and [`Rattle::run`](super::Rattle::run) (the times t0 + k·h they
+    /// stamp would be NaN or ∞).
     pub fn with_time(mut self, t0: f64) -> Self {
         self.t0 = t0;
         self.time = t0;

@@ -26,6 +26,7 @@ pub use event::{StepEvent, StepObserver};
 use crate::diagnostics::Accumulator;
 use crate::error::StepError;
 use crate::state::State;
+use crate::tolerance::MAX_STEPS;
 use crate::trajectory::Trajectory;
 use lane::{Lane, LaneEnd};
 use stepper::{Projection, Stepper};
@@ -284,7 +285,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 }
                 // Beyond 2^53 steps neither the step count nor the times
                 // t0 + k h are exact any more (and the run would not end).
-                if x > 9007199254740992.0 {
+                if x > MAX_STEPS as f64 {
                     return fail(
                         traj,
                         StepError::InvalidInput {
@@ -300,23 +301,13 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 }
             }
         };
-        // Exactly the states the run will store: 0, s, 2s, …, and the last
-        // (a failing run may add its last good state: the buffer grows).
-        let capacity = if store {
-            // (reserved up to 256 MB; a longer run grows the buffer)
-            let budget = (1usize << 28) / (16 * dof.max(1));
-            usize::try_from((n / stride).saturating_add(1 + u64::from(n % stride != 0)))
-                .unwrap_or(usize::MAX)
-                .min(budget)
-        } else {
-            0
+        // The extent of the run (t0, n, t0 + n·h) and its storage, checked
+        // together as the particle path checks them.
+        let diagnostics = integ.diagnostics().then(|| integ.constraint_count());
+        traj = match Trajectory::for_run((dof, names), diagnostics, t0, h, n, stride, store) {
+            Ok(traj) => traj,
+            Err(e) => return fail(traj, e),
         };
-        traj = Trajectory::new(dof, t0, h, stride, capacity);
-        traj.set_names(names);
-        if integ.diagnostics() {
-            traj.set_constraints(integ.constraint_count());
-            traj.reserve_multipliers(capacity);
-        }
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
         let mut p: Vec<f64> = z0.p.as_slice().to_vec();
         let mut prev_q = q.clone();

@@ -16,6 +16,7 @@ pub(super) fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             w.extend([1, b(value)]);
             pack_str(what, w);
         }
+        StepError::Storage { step, states, dof } => w.extend([11, step, states, dof as u64]),
         StepError::NonFinite {
             what,
             step,
@@ -169,6 +170,11 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
                 source,
             }
         }
+        11 => StepError::Storage {
+            step: r.word()?,
+            states: r.word()?,
+            dof: r.index("dof")?,
+        },
         8 => StepError::SingularShakeJacobian {
             step: r.word()?,
             t: r.float()?,
