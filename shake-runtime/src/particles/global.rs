@@ -3,8 +3,8 @@
 //! N(q0) = G(q0) M⁻¹ G(q0)ᵀ assembled from the stencils' gradients and
 //! factorised by the banded or sparse [`SpdSolver`].
 
-use super::cluster::ClusterArgs;
 use super::graph::{self, Numbering};
+use super::plan::ClusterArgs;
 use super::{ParticleError, ParticleSystem};
 use crate::report::StepReport;
 use crate::solver::SpdSolver;

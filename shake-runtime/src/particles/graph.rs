@@ -2,7 +2,7 @@
 //! share a particle), its connected components (clusters), the checks that
 //! need the concrete topology, and the pattern of N = G M⁻¹ Gᵀ.
 
-use super::cluster::{FamilyClusters, MAX_CLUSTER, MAX_CLUSTER_COORDS};
+use super::plan::{FamilyClusters, MAX_CLUSTER, MAX_CLUSTER_COORDS};
 use super::{ParticleSystem, TopologyError};
 
 /// Constraint c of the system as (family, member).

@@ -60,6 +60,7 @@ pub mod generate;
 mod global;
 mod graph;
 mod options;
+mod plan;
 mod rattle;
 mod run;
 mod state;
@@ -69,13 +70,13 @@ mod system;
 mod table;
 
 pub use crate::report::StepReport;
-#[doc(hidden)]
-pub use cluster::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 pub use error::{ParticleError, TopologyError};
 pub use options::{Method, Options, SolverChoice};
+#[doc(hidden)]
+pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 pub use rattle::Rattle;
 pub use run::{RunOutcome, RunSummary};
 pub use state::{ParticleState, Trajectory};
 pub use stencil::Stencil;
-pub use system::{ConstraintFamily, ParticleSystem, PotentialFamily};
+pub use system::{ClusterKernel, ConstraintFamily, ParticleSystem, PotentialFamily};
 pub use table::Table;

@@ -3,10 +3,10 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use super::cluster::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
 use super::global::Global;
 use super::graph::{self, Numbering};
 use super::options::{Method, Options, SolverChoice};
+use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
 use super::{ParticleError, ParticleState, ParticleSystem};
 use crate::report::StepReport;
 use crate::solver::SpdSolver;
@@ -87,7 +87,7 @@ impl Rattle {
                     solver: "clusters",
                     why: format!(
                         "a cluster has more than {} constraints or spans families",
-                        super::cluster::MAX_CLUSTER
+                        super::plan::MAX_CLUSTER
                     ),
                 })
             }

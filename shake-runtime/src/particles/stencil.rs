@@ -56,3 +56,26 @@ pub trait Stencil: Send + Sync {
     /// layout of `x`).
     fn gradient(&self, x: &[f64], c: &[f64], grad: &mut [f64]) -> f64;
 }
+
+/// Squared extent of a member: Σ_a |x_a − x̄|² over its particles (|x_a|²
+/// for a single-particle member, whose constraint refers to the origin).
+#[inline(always)]
+pub(crate) fn extent2<S: Stencil>(xm: &[f64]) -> f64 {
+    let (d, ar) = (S::DIM, S::ARITY);
+    if ar == 1 {
+        return xm[..d].iter().map(|v| v * v).sum();
+    }
+    let mut e = 0.0;
+    for c in 0..d {
+        let mut mean = 0.0;
+        for a in 0..ar {
+            mean += xm[a * d + c];
+        }
+        mean /= ar as f64;
+        for a in 0..ar {
+            let r = xm[a * d + c] - mean;
+            e += r * r;
+        }
+    }
+    e
+}

@@ -1,12 +1,13 @@
 //! A system of particles: masses, constraint families, potential families.
 
-use super::cluster::{self, ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
+use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
+use super::stencil::extent2;
 use super::{Stencil, Table, TopologyError};
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
 /// evaluated through one [`Stencil`]. Constraint k of the family is
 /// g_k(x) = f(x_{i_k1}, …, x_{i_kA}; c_k).
-pub trait ConstraintFamily: Send + Sync {
+pub trait ConstraintFamily: ClusterKernel + Send + Sync {
     /// The family's declared name (for errors and diagnostics).
     fn name(&self) -> &str;
     /// Its rows.
@@ -61,6 +62,14 @@ pub trait ConstraintFamily: Send + Sync {
         out: &mut [f64],
         ratio: bool,
     ) -> f64;
+}
+
+/// The cluster kernels of a constraint family (`cluster`), a supertrait of
+/// [`ConstraintFamily`] so that the solvers reach them through the family's
+/// trait object; declared here with data types only and implemented where
+/// the kernels are, so that the model names no kernel.
+#[doc(hidden)]
+pub trait ClusterKernel {
     /// The position stage of RATTLE on every independent cluster of this
     /// family (per-cluster Newton; monomorphic in the stencil); with `fuse`
     /// (no potential) the velocity stage too. `store` keeps every member's
@@ -104,10 +113,10 @@ pub trait PotentialFamily: Send + Sync {
 }
 
 /// A family: a stencil applied to every row of a table.
-struct Family<S> {
+pub(crate) struct Family<S> {
     name: String,
-    stencil: S,
-    table: Table,
+    pub(crate) stencil: S,
+    pub(crate) table: Table,
     dim: usize,
 }
 
@@ -166,7 +175,7 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
             // Each factor's square root separately: their product stays
             // representable down to length scales of ~1e-150.
             let n2: f64 = gr.iter().map(|v| v * v).sum();
-            scale2[k] = (n2.sqrt() * cluster::extent2::<S>(x).sqrt()).max(f64::MIN_POSITIVE);
+            scale2[k] = (n2.sqrt() * extent2::<S>(x).sqrt()).max(f64::MIN_POSITIVE);
         }
     }
     fn scatter(
@@ -256,40 +265,6 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
             }
         }
         worst
-    }
-    fn shake_clusters(
-        &self,
-        plan: &FamilyClusters,
-        args: &ClusterArgs<'_>,
-        fuse: bool,
-        store: Option<&mut [f64]>,
-        warm: bool,
-        q: &mut [f64],
-        p: &mut [f64],
-        report: &mut ClusterReport,
-    ) -> Result<(), ClusterFailure> {
-        cluster::shake_clusters(
-            &self.stencil,
-            &self.table,
-            plan,
-            args,
-            fuse,
-            store,
-            warm,
-            q,
-            p,
-            report,
-        )
-    }
-    fn project_clusters(
-        &self,
-        plan: &FamilyClusters,
-        inv_mass: &[f64],
-        q: &[f64],
-        p: &mut [f64],
-        report: &mut ClusterReport,
-    ) -> Result<(), ClusterFailure> {
-        cluster::project_clusters(&self.stencil, &self.table, plan, inv_mass, q, p, report)
     }
 }
 
