@@ -1,4 +1,4 @@
-//! Fuzzing the public API with hostile values (issue 13): every input class a
+//! Fuzzing the public API with hostile values: every input class a
 //! user can get wrong — parameters, the step size h, the start time, the stop
 //! rule, the stride, the options, and the state (wrong length, far from M,
 //! zero, non-finite, near the exceptional fibres of the Hopf constraint,
@@ -873,7 +873,7 @@ fn fuzz_api_long() {
     assert_clean(&c);
 }
 
-/// Issue 13 saw `run` and `project_to_hidden` spin for > 30 s on a parameter
+/// `run` and `project_to_hidden` once spun for > 30 s on a parameter
 /// of f64::MAX: every parameter of every system at ±f64::MAX (and ±∞, NaN),
 /// with every operation, through the same judge (and the same watchdog).
 #[test]

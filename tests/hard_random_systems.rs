@@ -190,14 +190,13 @@ proptest! {
     }
 }
 
-/// Found by `momentum_dependent_quadratic_family` on 2026-11-25 (and
-/// already there at commit 9d9e598): one triple-jump RATTLE step over
+/// Found by `momentum_dependent_quadratic_family`: one triple-jump RATTLE step over
 /// Störmer–Verlet and the step back with −h miss the start by 0.86 while
 /// every check of the substeps passes. A substep lands on another crossing
 /// of its fibre with M^H, and neither the fibre-jump test (its Newton
 /// predicted the far root) nor the component test (det N keeps its sign)
-/// sees it. The reverse check (`Options::reverse_tolerance`, issue 11
-/// item iii) refuses the step, and so does the round-off bound on g after
+/// sees it. The reverse check (`Options::reverse_tolerance`) refuses the
+/// step, and so does the round-off bound on g after
 /// a step (the jumped substep's Newton stops at 3.6e-13). The property
 /// `check` above passes on this case now. (`tests/hard_degenerate.rs`
 /// has a jump that only the reverse check sees.)

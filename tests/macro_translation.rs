@@ -1,4 +1,4 @@
-//! Accurate emission (issue 10, item 6): the macro emits values in the form
+//! Accurate emission: the macro emits values in the form
 //! the user wrote, so a chain translated far from the origin meets its
 //! constraints as well as the untranslated one.
 //!

@@ -316,7 +316,7 @@ fn free_rigid_dimer_rotates_uniformly() {
 }
 
 /// A chain far from the origin satisfies its constraints as well as at the
-/// origin: the stencils are written on differences (issue 10, item 6).
+/// origin: the stencils are written on differences.
 #[test]
 fn translated_chain_keeps_its_constraints() {
     let measure = |shift: f64| {

@@ -36,7 +36,7 @@ fn newton_not_converged_mid_run_keeps_the_trajectory() {
     };
     assert_eq!(stage, Stage::Shake);
     assert!(step > 1, "the failure should come mid-run (step {step})");
-    // The time of the step attempted, t0 + k·h (issue 11), not its start.
+    // The time of the step attempted, t0 + k·h, not its start.
     assert_eq!(t, step as f64 * 0.5);
     assert!(
         matches!(source, shake::SolveError::NotConverged { iterations: 50, residual } if residual > 1e-3)

@@ -1,4 +1,4 @@
-//! Scale invariance and tiny steps (issue 13).
+//! Scale invariance and tiny steps.
 //!
 //! Rescaling lengths by L and time by T (q → Lq, t → Tt, p → (L/T)p for
 //! these unit-mass systems, gravity γ → γL/T², rod lengths ℓ → Lℓ, h → Th)

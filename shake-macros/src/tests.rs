@@ -249,7 +249,7 @@ fn bad_input_never_panics() {
     }
 }
 
-/// Sources of the hostile declarations of issue 13 ("Macro crashes").
+/// Sources of hostile declarations: each once crashed or hung the macro.
 pub(crate) mod hostile {
     fn wrap(lets: &str, h: &str) -> String {
         format!(
@@ -359,7 +359,7 @@ pub(crate) fn expand_like_rustc(src: &str) -> (f64, bool, String) {
         .expect("the expansion panicked")
 }
 
-/// Expansion time of the hostile declarations of issue 13 (BENCHMARKS.md).
+/// Expansion time of the hostile declarations (BENCHMARKS.md).
 /// Run with `cargo test -p shake-macros --release -- --ignored --nocapture
 /// hostile_timings`; `HOSTILE=<part of a name>` runs only the matching cases
 /// (one at a time is kinder to a machine when checking an old version that
@@ -449,7 +449,7 @@ fn hostile_phases() {
     println!("{s}");
 }
 
-/// The crash classes of issue 13 are compile errors with a message, on a
+/// The hostile declarations are compile errors with a message, on a
 /// stack the size of rustc's.
 #[test]
 fn hostile_depths_are_refused_with_a_message() {

@@ -1,4 +1,4 @@
-//! Input validation at the API boundary (issue 13): every number a user
+//! Input validation at the API boundary: every number a user
 //! hands to an [`Integrator`](crate::Integrator) is checked once, before any
 //! work, and a bad one is refused with [`StepError::InvalidInput`] naming it
 //! and carrying its value.

@@ -51,7 +51,7 @@ const LAYERS: &[(&str, u8)] = &[
 ];
 
 /// Today's upward imports, (importing file, defining file) under src/, with
-/// the lines they were found at (commit 73952cd; `SHAKE_LAYERS_EDGES=1` and
+/// the lines they were found at (`SHAKE_LAYERS_EDGES=1` and
 /// `--nocapture` print today's). Each step of docs/engine.md 4.5 deletes its
 /// entries; an entry that no longer occurs fails the test.
 const ALLOW: &[(&str, &str)] = &[];

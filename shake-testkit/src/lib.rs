@@ -1,5 +1,5 @@
 //! The test kit of shake: what the tests, examples and benches share, in one
-//! crate instead of `#[path]` includes (issue 11). Not published.
+//! crate instead of `#[path]` includes. Not published.
 //!
 //! - [`models`]: hand-written systems (pendulum, spherical and double
 //!   pendulum, the Hopf constraint, degenerate and index-five cases), with

@@ -445,7 +445,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                     }
                     info
                 }
-                // The step attempted was step k, at t0 + k·h (issue 11).
+                // The step attempted was step k, at t0 + k·h: its error says so.
                 Err(e) => end_before!(e.at(k, t0 + k as f64 * h)),
             };
             if on_stride {
