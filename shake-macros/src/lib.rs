@@ -273,7 +273,11 @@ use quote::quote;
 /// - integer and real exponents satisfy |n| ≤ 1024, also after merging
 ///   (`x^a * x^b = x^(a+b)`): beyond, x^n over- or underflows `f64` for every
 ///   |x| outside [0.5, 2];
-/// - ranges of families and sums have at most 10⁵ members, and d ≤ 1024.
+/// - ranges of families and sums have at most 10⁵ members (a particle
+///   template's sums 1024), and the sums of one declaration expand to at
+///   most 10⁶ terms in all, nested sums multiplying their lengths (two
+///   nested sums of 10⁵ were 10¹⁰ terms, minutes and gigabytes before any
+///   error); d ≤ 1024.
 ///
 /// A `let` used many times costs one node however it is used: work and
 /// memory are linear in the size of the expression DAG (40 `let`s each

@@ -474,6 +474,20 @@ fn hostile_depths_are_refused_with_a_message() {
             hostile::parens(0).replacen("q[0]", "q[0]^1000 * q[0]^1000", 1),
             "|exponent| 2000",
         ),
+        // One range past its limit, and 10¹⁰ terms from two within it
+        // (this ran for minutes and gigabytes before the total was held).
+        (
+            hostile::parens(0).replacen("q[0]", "sum i in 0..2000000000 { q[0] }", 1),
+            "range is too long",
+        ),
+        (
+            hostile::parens(0).replacen(
+                "q[0]",
+                "sum i in 0..100000 { sum j in 0..100000 { q[0] } }",
+                1,
+            ),
+            "more than 1000000 terms in all",
+        ),
     ];
     for (src, msg) in cases {
         let (_, refused, head) = expand_like_rustc(&src);

@@ -61,6 +61,8 @@ struct Template<'a> {
     scalars: HashMap<String, NodeId>,
     /// Bound `sum` indices, innermost last.
     sums: Vec<(String, i64)>,
+    /// Terms the `sum`s expanded so far (`shake_symbolic::lower::MAX_TERMS`).
+    terms: u64,
     /// Build nodes as written (no canonical form): for the emitted value.
     raw: bool,
 }
@@ -441,6 +443,19 @@ impl Template<'_> {
                         "this `sum` is too long (more than 1024 terms)",
                     ));
                 }
+                self.terms = self
+                    .terms
+                    .saturating_add(hi.saturating_sub(lo).max(0) as u64);
+                if self.terms > shake_symbolic::lower::MAX_TERMS {
+                    return Err(err(
+                        var.span(),
+                        format!(
+                            "the `sum`s of this template expand to more than {} terms in all \
+                             (nested sums multiply their lengths)",
+                            shake_symbolic::lower::MAX_TERMS
+                        ),
+                    ));
+                }
                 let name = var.to_string();
                 if self.scalars.contains_key(&name) || self.particle(&name).is_some() {
                     return Err(err(
@@ -563,6 +578,7 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
         graph,
         scalars,
         sums: Vec::new(),
+        terms: 0,
         raw: false,
     };
     let value = match t.val(&fam.template)? {
@@ -626,6 +642,7 @@ fn lower_family(def: &ParticleDef, fam: &FamilyDecl) -> Result<Lowered, Error> {
         graph,
         scalars: t.scalars,
         sums: Vec::new(),
+        terms: 0,
         raw: true,
     };
     let written = match r.val(&fam.template)? {
@@ -1102,6 +1119,11 @@ mod tests {
             ),
             ("norm2(x[0] - x[b])", "only through its table"),
             ("norm2(x[a] - x[b]) - p[a][0]", "is a momentum"),
+            // 10⁹ terms: refused at once, not expanded for minutes.
+            (
+                "sum i in 0..1000 { sum j in 0..1000 { sum k in 0..1000 { x[a][0] } } }",
+                "more than 1000000 terms in all",
+            ),
         ];
         for (template, msg) in cases {
             let src = format!(

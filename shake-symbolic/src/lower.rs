@@ -51,7 +51,16 @@ struct Lowerer {
     /// Bound family / sum indices, innermost last (they shadow nothing:
     /// clashes with declared names are refused).
     indices: Vec<(String, i64)>,
+    /// Terms the `sum`s expanded so far ([`MAX_TERMS`]).
+    terms: u64,
 }
+
+/// The most terms the `sum`s of one declaration may expand to, counted
+/// over every sum and every nesting (nested sums multiply): a single range
+/// is held to 100 000 terms, but two nested ones of that length are 10¹⁰
+/// terms, minutes of expansion and gigabytes, before any error could be
+/// reported. A million terms lower in about a second.
+pub const MAX_TERMS: u64 = 1_000_000;
 
 /// The largest d accepted: the Hessian outputs are (2d)² arrays.
 const MAX_DOF: usize = 1024;
@@ -397,8 +406,20 @@ impl Lowerer {
                 }
             }
             ExprKind::Sum(var, lo, hi, body) => {
+                let range = self.range(lo, hi)?;
+                let len = range.end.saturating_sub(range.start).max(0) as u64;
+                self.terms = self.terms.saturating_add(len);
+                if self.terms > MAX_TERMS {
+                    return Err(Error::new(
+                        var.span(),
+                        format!(
+                            "the `sum`s of this declaration expand to more than {MAX_TERMS} terms in \
+                             all (nested sums multiply their lengths)"
+                        ),
+                    ));
+                }
                 let mut terms = Vec::new();
-                for i in self.range(lo, hi)? {
+                for i in range {
                     self.bind_index(var, i)?;
                     let t = self.real(body);
                     self.indices.pop();
@@ -547,6 +568,7 @@ pub fn lower_with(def: &SystemDef, factored: bool) -> Result<System, Vec<Error>>
         dof: 0,
         syms: HashMap::new(),
         indices: Vec::new(),
+        terms: 0,
     };
     let mut errors = Vec::new();
     let mut names = Names::default();

@@ -265,7 +265,9 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
                 },
             });
         }
-        if !need_jac && worst > 0.25 * prev {
+        // Contraction slower than ½ per iteration (the residual is linear
+        // in g): the Jacobian at this iterate.
+        if !need_jac && worst > 0.5 * prev {
             for j in 0..MC {
                 gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
                 stencil.gradient(&xm[..wd], data[j], &mut gr[j][..wd]);

@@ -277,8 +277,9 @@ pub(super) fn shake_one<S: Stencil>(
                 },
             });
         }
-        if !need_jac && worst > 0.25 * prev {
-            // Poor contraction: the Jacobian at this iterate.
+        if !need_jac && worst > 0.5 * prev {
+            // Poor contraction (slower than ½, the residual being linear
+            // in g): the Jacobian at this iterate.
             for j in 0..if fuse { 0 } else { mc } {
                 let sj = &slots[j * ar..(j + 1) * ar];
                 gather_member::<S>(sj, &l.x, &mut l.xm);
