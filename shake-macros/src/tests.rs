@@ -604,3 +604,36 @@ fn capitalised_parameters_are_fields_not_arguments() {
         assert!(out.contains("Self { L : __L , G : __G }"), "{out:.400}");
     }
 }
+
+/// N ≡ 0 where the degeneracy is not a polynomial identity: with
+/// L = q0 p1 − q1 p0 − c and H = |p|²/2 + V(|q|²), {H, L} ≡ 0 and N ≡ 0 for
+/// every V; for V = exp(−r²) + r⁶/3 the generated N is −7e-16, which a rank
+/// relative to N's own entries took for full. Judged against the size of
+/// the products that make up N, it is zero: refused (with `r²` through a
+/// `let` and written out). A nondegenerate system of the same shape is not.
+#[test]
+fn an_n_at_round_off_of_its_terms_is_singular() {
+    let radial = |v: &str| {
+        format!(
+            "struct S {{ parameters {{ c }} dof q[2], p[2]; let r2 = q[0]^2 + q[1]^2; \
+             hamiltonian = (p[0]^2 + p[1]^2) / 2 + {v}; \
+             constraints {{ l: q[0]*p[1] - q[1]*p[0] - c }} }}"
+        )
+    };
+    for v in [
+        "exp(-r2) + r2^3 / 3",
+        "exp(-(q[0]^2 + q[1]^2)) + (q[0]^2 + q[1]^2)^3 / 3",
+    ] {
+        let (_, refused, head) = expand_like_rustc(&radial(v));
+        assert!(
+            refused && head.contains("nondegeneracy assumption fails"),
+            "{v}: {head:.400}"
+        );
+    }
+    // The same potential with a holonomic constraint: N = G A Gᵀ ≠ 0.
+    let src = "struct S { parameters { l } dof q[2], p[2]; let r2 = q[0]^2 + q[1]^2; \
+               hamiltonian = (p[0]^2 + p[1]^2) / 2 + exp(-r2) + q[1]; \
+               constraints { rod: r2 - l^2 } }";
+    let (_, refused, head) = expand_like_rustc(src);
+    assert!(!refused, "{head:.400}");
+}

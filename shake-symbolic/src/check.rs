@@ -268,7 +268,7 @@ fn bracket_scale(graph: &mut Graph, f: NodeId, g: NodeId, d: usize) -> Vec<NodeI
 /// ```text
 /// error: the nondegeneracy assumption fails for constraint `bar`: {{H, bar}, g_j} = 0 for every j ...
 /// ```
-fn nondegeneracy(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
+fn nondegeneracy(cx: &mut Ctxt, sys: &mut System, der: &Derived, s: &mut Sampler) {
     let m = sys.constraints.len();
     if m == 0 {
         return;
@@ -304,6 +304,13 @@ fn nondegeneracy(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
     if symbolic {
         return;
     }
+    // An entry within 1e-8 of the size of the products that make it up is
+    // zero to round-off (as for the coisotropy brackets), however small the
+    // entries are in absolute terms. (With L = q0 p1 − q1 p0 − c and
+    // H = |p|²/2 + V(|q|²), N ≡ 0 for every V, but V = exp(−r²) + r⁶/3 left
+    // N = −7e-16, which a rank relative to N's own largest entry took for
+    // full.)
+    let size = NSize::new(sys);
     // Stop at the first point of M^H where N has full rank.
     let mut found = 0;
     for i in 0..SAMPLES {
@@ -315,7 +322,13 @@ fn nondegeneracy(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
         };
         found += 1;
         let vals = s.eval(&sys.graph, &z);
-        let a: Vec<f64> = der.n.iter().flatten().map(|n| vals[n.index()]).collect();
+        let mut a: Vec<f64> = der.n.iter().flatten().map(|n| vals[n.index()]).collect();
+        let sizes = size.at(&vals, sys.dof);
+        for (x, size) in a.iter_mut().zip(&sizes) {
+            if x.abs() <= 1e-8 * size {
+                *x = 0.0;
+            }
+        }
         if rank_rows(&a, m, m).0 == m {
             return;
         }
@@ -332,6 +345,86 @@ fn nondegeneracy(cx: &mut Ctxt, sys: &System, der: &Derived, s: &mut Sampler) {
             found
         ),
     );
+}
+
+/// The size of the products that make up N_ij = {{H,g_i},g_j} at a point.
+/// With {f, g} = Σ_a ±∂f/∂a ∂g/∂ā (ā the conjugate of a: p_k for q_k and
+/// q_k for p_k), N_ij = Σ_b ±∂{g_i,H}/∂b ∂g_j/∂b̄ and ∂{g_i,H}/∂b =
+/// Σ_a ±(∂²g_i/∂a∂b ∂H/∂ā + ∂g_i/∂a ∂²H/∂ā∂b), so
+///
+/// |N_ij| ≤ Σ_b |∂g_j/∂b̄| Σ_a (|∂²g_i/∂a∂b| |∂H/∂ā| + |∂g_i/∂a| |∂²H/∂ā∂b|),
+///
+/// the sum of the absolute values of its terms: what the entry's rounding
+/// is relative to. Gradients and Hessians are kept sparse (their nonzero
+/// entries as graph nodes), so the size costs the Hessians' entries.
+struct NSize {
+    h_grad: Vec<(usize, NodeId)>,
+    h_hess: Vec<(usize, usize, NodeId)>,
+    g_grad: Vec<Vec<(usize, NodeId)>>,
+    g_hess: Vec<Vec<(usize, usize, NodeId)>>,
+}
+
+impl NSize {
+    fn new(sys: &mut System) -> Self {
+        let graph = &mut sys.graph;
+        let grad = |graph: &mut Graph, f: NodeId| -> Vec<(usize, NodeId)> {
+            graph
+                .grad(f)
+                .into_iter()
+                .map(|(v, n)| (v.index(), n))
+                .collect()
+        };
+        let hess = |graph: &mut Graph, g: &[(usize, NodeId)]| {
+            let mut out = Vec::new();
+            for &(a, ga) in g {
+                for (b, gab) in graph.grad(ga) {
+                    out.push((a, b.index(), gab));
+                }
+            }
+            out
+        };
+        let h_grad = grad(graph, sys.hamiltonian);
+        let h_hess = hess(graph, &h_grad);
+        let nodes: Vec<NodeId> = sys.constraints.iter().map(|c| c.node).collect();
+        let g_grad: Vec<_> = nodes.iter().map(|&g| grad(graph, g)).collect();
+        let g_hess = g_grad.iter().map(|g| hess(graph, g)).collect();
+        NSize {
+            h_grad,
+            h_hess,
+            g_grad,
+            g_hess,
+        }
+    }
+
+    /// The sizes of N's m×m entries, row-major, from the graph's values.
+    fn at(&self, vals: &[f64], d: usize) -> Vec<f64> {
+        let bar = |a: usize| if a < d { a + d } else { a - d };
+        let dense = |g: &[(usize, NodeId)]| {
+            let mut v = vec![0.0; 2 * d];
+            for &(a, n) in g {
+                v[a] = vals[n.index()].abs();
+            }
+            v
+        };
+        let h = dense(&self.h_grad);
+        let g: Vec<Vec<f64>> = self.g_grad.iter().map(|g| dense(g)).collect();
+        let m = g.len();
+        let mut out = vec![0.0; m * m];
+        for i in 0..m {
+            // w_b = Σ_a (|∂²g_i/∂a∂b| |∂H/∂ā| + |∂g_i/∂a| |∂²H/∂ā∂b|).
+            let mut w = vec![0.0; 2 * d];
+            for &(a, b, n) in &self.g_hess[i] {
+                w[b] += vals[n.index()].abs() * h[bar(a)];
+            }
+            for &(c, b, n) in &self.h_hess {
+                w[b] += g[i][bar(c)] * vals[n.index()].abs();
+            }
+            for j in 0..m {
+                out[i * m + j] = (0..2 * d).map(|b| w[b] * g[j][bar(b)]).sum();
+            }
+        }
+        out
+    }
 }
 
 /// The numerical rank of an r×c row-major matrix (rows orthogonalised in
