@@ -637,3 +637,21 @@ fn an_n_at_round_off_of_its_terms_is_singular() {
     let (_, refused, head) = expand_like_rustc(src);
     assert!(!refused, "{head:.400}");
 }
+
+/// A function of a constant outside its domain folds to NaN or ∞ and made
+/// H NaN at every state; it is refused where it is written.
+#[test]
+fn a_function_of_a_constant_outside_its_domain_is_refused() {
+    for (term, says) in [
+        ("sqrt(-1) * q[1]", "`sqrt` of the constant -1"),
+        ("ln(0) * q[1]", "`ln` of the constant 0"),
+        ("ln(1 - 2) + q[1]", "`ln` of the constant -1"),
+    ] {
+        let src = hostile::parens(0).replacen("q[0]", term, 1);
+        let (_, refused, head) = expand_like_rustc(&src);
+        assert!(refused && head.contains(says), "{term}: {head:.300}");
+    }
+    let src = hostile::parens(0).replacen("q[0]", "sqrt(4) * q[1] + sqrt(q[0]^2 + 1)", 1);
+    let (_, refused, head) = expand_like_rustc(&src);
+    assert!(!refused, "{head:.300}");
+}

@@ -8,7 +8,7 @@ mod models;
 
 use models::Model;
 use numpy::ndarray::{Array1, Array2};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArrayDyn};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
@@ -151,8 +151,8 @@ impl System {
     }
 
     /// H(z) at a state z = (q, p) of length 2d.
-    fn hamiltonian(&self, z: PyReadonlyArray1<f64>) -> PyResult<f64> {
-        let (q, p) = self.split(&z)?;
+    fn hamiltonian(&self, z: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let (q, p) = self.split(z)?;
         Ok(with_model!(&self.model, s => s.hamiltonian(&q, &p)))
     }
 
@@ -160,9 +160,9 @@ impl System {
     fn constraints<'py>(
         &self,
         py: Python<'py>,
-        z: PyReadonlyArray1<f64>,
+        z: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let (q, p) = self.split(&z)?;
+        let (q, p) = self.split(z)?;
         let mut g = vec![0.0; self.constraint_count()];
         with_model!(&self.model, s => s.constraints(&q, &p, &mut g));
         Ok(g.into_pyarray(py))
@@ -172,9 +172,9 @@ impl System {
     fn hidden_constraints<'py>(
         &self,
         py: Python<'py>,
-        z: PyReadonlyArray1<f64>,
+        z: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let (q, p) = self.split(&z)?;
+        let (q, p) = self.split(z)?;
         let mut g = vec![0.0; self.constraint_count()];
         with_model!(&self.model, s => s.hidden_constraints(&q, &p, &mut g));
         Ok(g.into_pyarray(py))
@@ -202,18 +202,9 @@ impl System {
 }
 
 impl System {
-    fn split(&self, z: &PyReadonlyArray1<f64>) -> PyResult<(Vec<f64>, Vec<f64>)> {
-        let z = z.as_array();
+    fn split(&self, z: &Bound<'_, PyAny>) -> PyResult<(Vec<f64>, Vec<f64>)> {
         let d = self.dof();
-        if z.len() != 2 * d {
-            return Err(InvalidInputError::new_err(format!(
-                "a state of {} has 2d = {} entries, not {}",
-                self.name,
-                2 * d,
-                z.len()
-            )));
-        }
-        let z: Vec<f64> = z.iter().copied().collect();
+        let (z, _) = real_array(z, "z", 1, 2 * d)?;
         Ok((z[..d].to_vec(), z[d..].to_vec()))
     }
 }
@@ -560,6 +551,49 @@ fn plan(
     })
 }
 
+/// `obj` as real numbers in a float64 array of `ndim` dimensions, the last
+/// of length `len` (2d: q then p), flattened row by row, with its number of
+/// rows. Anything NumPy reads as an array is taken (lists, integer arrays,
+/// float32, big-endian, non-contiguous: converted); complex, boolean,
+/// object or string data, or a wrong shape, is an `InvalidInputError` that
+/// says what was expected and what was given.
+fn real_array(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    ndim: usize,
+    len: usize,
+) -> PyResult<(Vec<f64>, usize)> {
+    let np = obj.py().import("numpy")?;
+    let a = np.call_method1("asarray", (obj,))?;
+    let dtype = a.getattr("dtype")?;
+    let kind: String = dtype.getattr("kind")?.extract()?;
+    let shape: Vec<usize> = a.getattr("shape")?.extract()?;
+    let want = if ndim == 1 {
+        format!("({len},)")
+    } else {
+        format!("(k, {len})")
+    };
+    if !matches!(kind.as_str(), "f" | "i" | "u") {
+        return Err(InvalidInputError::new_err(format!(
+            "{name} must hold real numbers (float64; integers are converted), not dtype {}: \
+             an array of shape {want}, q then p",
+            dtype.str()?
+        )));
+    }
+    if shape.len() != ndim || shape.last() != Some(&len) {
+        let given: Vec<String> = shape.iter().map(usize::to_string).collect();
+        let comma = if shape.len() == 1 { "," } else { "" };
+        return Err(InvalidInputError::new_err(format!(
+            "{name} must have shape {want} (q then p, 2d = {len}), not ({}{comma})",
+            given.join(", ")
+        )));
+    }
+    let a = np.call_method1("ascontiguousarray", (a, "float64"))?;
+    let a: PyReadonlyArrayDyn<'_, f64> = a.extract()?;
+    let rows = if ndim == 1 { 1 } else { shape[0] };
+    Ok((a.as_array().iter().copied().collect(), rows))
+}
+
 fn rows(system: &System, z: &[f64], n: usize) -> PyResult<Vec<Vec<f64>>> {
     let d2 = 2 * system.dof();
     if z.len() != n * d2 {
@@ -587,7 +621,7 @@ fn rows(system: &System, z: &[f64], n: usize) -> PyResult<Vec<Vec<f64>>> {
 fn run(
     py: Python<'_>,
     system: &System,
-    z0: PyReadonlyArray1<f64>,
+    z0: &Bound<'_, PyAny>,
     h: f64,
     steps: Option<u64>,
     time: Option<f64>,
@@ -614,11 +648,8 @@ fn run(
         newton_tolerance,
         max_iterations,
     )?;
-    let z0 = rows(
-        system,
-        &z0.as_array().iter().copied().collect::<Vec<_>>(),
-        1,
-    )?;
+    let (z0, _) = real_array(z0, "z0", 1, 2 * system.dof())?;
+    let z0 = rows(system, &z0, 1)?;
     let (d, m) = (system.dof(), system.constraint_count());
     let mut outs = py.detach(|| run_all(&system.model, base, &plan, &z0));
     let out = outs.pop().expect("one run");
@@ -641,7 +672,7 @@ fn run(
 fn ensemble(
     py: Python<'_>,
     system: &System,
-    z0s: PyReadonlyArray2<f64>,
+    z0s: &Bound<'_, PyAny>,
     h: f64,
     steps: Option<u64>,
     time: Option<f64>,
@@ -669,9 +700,13 @@ fn ensemble(
         newton_tolerance,
         max_iterations,
     )?;
-    let a = z0s.as_array();
-    let k = a.nrows();
-    let z0s = rows(system, &a.iter().copied().collect::<Vec<_>>(), k)?;
+    if !matches!(errors, "raise" | "return") {
+        return Err(InvalidInputError::new_err(format!(
+            "errors must be \"raise\" or \"return\", not {errors:?}"
+        )));
+    }
+    let (flat, k) = real_array(z0s, "z0s", 2, 2 * system.dof())?;
+    let z0s = rows(system, &flat, k)?;
     let (d, m) = (system.dof(), system.constraint_count());
     let outs = py.detach(|| run_all(&system.model, base, &plan, &z0s));
     let mut results = Vec::with_capacity(k);

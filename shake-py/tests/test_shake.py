@@ -197,3 +197,58 @@ def test_chains_compiled_and_declared_agree():
     a = shake.rattle(declared, z0, 0.01, steps=50, base="verlet")
     b = shake.rattle(compiled, z0, 0.01, steps=50, base="verlet")
     assert close_to_roundoff(a.trajectory, b.trajectory)
+
+
+def test_states_of_integers_or_other_real_dtypes_are_converted():
+    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    want = shake.rattle(sys, np.array([1.0, 0.0, 0.0, 0.0]), 0.01, steps=5).trajectory
+    for z0 in (
+        np.array([1, 0, 0, 0]),
+        [1, 0, 0, 0],
+        np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32),
+        np.array([1.0, 0.0, 0.0, 0.0], dtype=">f8"),
+        np.array([1.0, 9.0, 0.0, 9.0, 0.0, 9.0, 0.0])[::2],
+    ):
+        out = shake.rattle(sys, z0, 0.01, steps=5)
+        assert np.array_equal(out.trajectory, want), z0
+    z0s = np.array([[1, 0, 0, 0], [0, -1, 1, 0]])
+    assert len(shake.ensemble(sys, z0s, 0.01, steps=5)) == 2
+    assert sys.hamiltonian([0, -1, 1, 0]) == 0.5 - 9.81
+
+
+@pytest.mark.parametrize(
+    "z0, says",
+    [
+        (np.array([1 + 0j, 0, 0, 0]), "real numbers"),
+        (np.array([1.0, 0.0, 0.0, 0.0], dtype=object), "real numbers"),
+        (np.array([True, False, False, False]), "real numbers"),
+        (np.array(["1", "0", "0", "0"]), "real numbers"),
+        (np.zeros((2, 2)), "shape (4,)"),
+        (np.zeros(3), "not (3,)"),
+    ],
+)
+def test_a_state_of_the_wrong_kind_or_shape_says_what_is_expected(z0, says):
+    # Each of these said "'ndarray' object cannot be cast as 'ndarray'".
+    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    with pytest.raises(shake.InvalidInputError) as info:
+        shake.rattle(sys, z0, 0.01, steps=5)
+    assert says in str(info.value)
+    assert "z0" in str(info.value)
+
+
+def test_unknown_option_values_are_refused():
+    # errors="bogus" was taken as "raise".
+    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    z0s = np.array([[1.0, 0.0, 0.0, 0.0]])
+    with pytest.raises(shake.InvalidInputError) as info:
+        shake.ensemble(sys, z0s, 0.01, steps=5, errors="bogus")
+    assert "bogus" in str(info.value)
+    with pytest.raises(shake.InvalidInputError):
+        shake.ensemble(sys, np.zeros(4), 0.01, steps=5)
+
+
+def test_a_constant_outside_a_function_domain_is_a_declaration_error():
+    # sqrt(-1) in H was accepted, and H was NaN at every state.
+    with pytest.raises(shake.DeclarationError) as info:
+        shake.declare(PENDULUM.replace("gravity * q[1]", "sqrt(-1) * q[1]"), length=1.0, gravity=9.81)
+    assert "sqrt" in str(info.value)

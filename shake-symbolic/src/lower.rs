@@ -400,10 +400,25 @@ impl Lowerer {
                     ));
                 }
                 let x = self.real(&args[0])?;
-                match func {
+                let y = match func {
                     None => self.graph.sqrt(x),
                     Some(func) => self.graph.call(func, x),
+                };
+                // A function of a constant outside its domain (sqrt(-1),
+                // ln(0)) folds to NaN or ∞: every H or g holding it would
+                // be NaN or ∞ at every state.
+                if self.graph.as_const(y).is_some_and(|v| !v.is_finite()) {
+                    return Err(Error::new(
+                        f.span(),
+                        format!(
+                            "`{name}` of the constant {} is not a finite real number",
+                            self.graph
+                                .as_const(x)
+                                .map_or("here".to_string(), |v| format!("{v}"))
+                        ),
+                    ));
                 }
+                y
             }
             ExprKind::Sum(var, lo, hi, body) => {
                 let range = self.range(lo, hi)?;

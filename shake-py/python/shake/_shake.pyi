@@ -75,7 +75,7 @@ def model(name: str, **parameters: float) -> System: ...
 def model_names() -> list[tuple[str, list[str]]]: ...
 def run(
     system: System,
-    z0: npt.NDArray[np.float64],
+    z0: npt.ArrayLike,
     h: float,
     *,
     steps: Optional[int] = None,
@@ -91,7 +91,7 @@ def run(
 ) -> Result: ...
 def ensemble(
     system: System,
-    z0s: npt.NDArray[np.float64],
+    z0s: npt.ArrayLike,
     h: float,
     *,
     steps: Optional[int] = None,
