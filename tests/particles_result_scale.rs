@@ -11,6 +11,9 @@ use shake::runtime::particles::{
 };
 
 const TOL: f64 = 1e-10;
+/// The hidden residual a projection may leave (`tolerance::HIDDEN_LIMIT`):
+/// the exact solve leaves about κ(N) ε, refused above √ε.
+const HIDDEN: f64 = 1.4901161193847656e-8;
 const SOLVERS: [SolverChoice; 3] = [
     SolverChoice::Clusters,
     SolverChoice::Band,
@@ -137,7 +140,7 @@ fn extreme_mass_ratios_never_hide_a_hidden_residual() {
         if let Ok(rep) = r.project(&mut z) {
             let hid = hidden_error(&z, &masses, &bonds);
             assert!(
-                hid <= 2.0 * TOL,
+                hid <= HIDDEN,
                 "{solver:?}: Ok with hidden residual {hid:e} (reported {:e})",
                 rep.max_hidden
             );
@@ -161,7 +164,7 @@ fn a_triangle_forced_collinear_is_a_typed_error() {
             let hid = hidden_error(&z, &[1.0; 3], &bonds);
             let err = length_error(z.q(), &bonds);
             assert!(
-                hid <= 2.0 * TOL && err <= 2.0 * TOL,
+                hid <= HIDDEN && err <= 2.0 * TOL,
                 "{solver:?}: Ok with length error {err:e}, hidden {hid:e} (reported {:e})",
                 rep.max_hidden
             );

@@ -564,7 +564,14 @@ fn real_array(
     len: usize,
 ) -> PyResult<(Vec<f64>, usize)> {
     let np = obj.py().import("numpy")?;
-    let a = np.call_method1("asarray", (obj,))?;
+    // (A ragged list or an object NumPy cannot read raises ValueError or
+    // TypeError there: the package's own error instead.)
+    let a = np.call_method1("asarray", (obj,)).map_err(|e| {
+        InvalidInputError::new_err(format!(
+            "{name} must be an array of real numbers (q then p, 2d = {len}): {}",
+            e.value(obj.py())
+        ))
+    })?;
     let dtype = a.getattr("dtype")?;
     let kind: String = dtype.getattr("kind")?.extract()?;
     let shape: Vec<usize> = a.getattr("shape")?.extract()?;

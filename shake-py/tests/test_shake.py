@@ -225,6 +225,7 @@ def test_states_of_integers_or_other_real_dtypes_are_converted():
         (np.array(["1", "0", "0", "0"]), "real numbers"),
         (np.zeros((2, 2)), "shape (4,)"),
         (np.zeros(3), "not (3,)"),
+        ([1.0, [0.0, 0.0], 0.0], "array of real numbers"),
     ],
 )
 def test_a_state_of_the_wrong_kind_or_shape_says_what_is_expected(z0, says):

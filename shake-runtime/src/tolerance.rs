@@ -332,12 +332,16 @@ pub(crate) fn relative_dot(a: &[f64], b: &[f64]) -> f64 {
 /// [`relative_dot`] with both vectors scaled by their largest entry.
 #[cold]
 fn relative_dot_scaled(a: &[f64], b: &[f64]) -> f64 {
+    // (`f64::max` drops NaN, so finiteness is asked first.)
+    if !a.iter().chain(b).all(|x| x.is_finite()) {
+        return f64::NAN;
+    }
     let am = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     let bm = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    if bm == 0.0 && a.iter().all(|x| x.is_finite()) {
+    if bm == 0.0 {
         return 0.0;
     }
-    if !(am.is_finite() && bm.is_finite()) || am == 0.0 {
+    if am == 0.0 {
         return f64::NAN;
     }
     let (ia, ib) = (1.0 / am, 1.0 / bm);

@@ -57,6 +57,15 @@ pub trait Stencil: Send + Sync {
     fn gradient(&self, x: &[f64], c: &[f64], grad: &mut [f64]) -> f64;
 }
 
+/// 1 / (|∇g| · extent) of a member from its gradient block and local
+/// coordinates (`tolerance::inverse_scale`), and its extent².
+#[inline(always)]
+pub(crate) fn member_scale<S: Stencil>(grad: &[f64], xm: &[f64]) -> (f64, f64) {
+    let n2: f64 = grad.iter().map(|v| v * v).sum();
+    let e2 = extent2::<S>(xm);
+    (crate::tolerance::inverse_scale(n2, e2), e2)
+}
+
 /// Squared extent of a member: Σ_a |x_a − x̄|² over its particles (|x_a|²
 /// for a single-particle member, whose constraint refers to the origin).
 #[inline(always)]

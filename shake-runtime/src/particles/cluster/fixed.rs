@@ -3,7 +3,8 @@
 //! loop is unrolled and every array lives in registers or L1.
 
 use super::*;
-use crate::tolerance::{inverse_scale, relative_dot, HIDDEN_LIMIT};
+use crate::particles::stencil::member_scale;
+use crate::tolerance::{relative_dot, HIDDEN_LIMIT};
 
 /// Largest ARITY and DIM of a stencil the fixed-size kernel takes.
 pub(super) const FX: usize = 3;
@@ -207,9 +208,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             };
             if rescale {
                 // (`rescale` is set only with `need_jac`: G is fresh.)
-                let n2: f64 = gr[j][..wd].iter().map(|v| v * v).sum();
-                e2_s[j] = extent2::<S>(&xm[..wd]);
-                inv_s[j] = inverse_scale(n2, e2_s[j]);
+                (inv_s[j], e2_s[j]) = member_scale::<S>(&gr[j][..wd], &xm[..wd]);
                 at_s[j] = xm;
             }
             gv[j] = g;
@@ -235,9 +234,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
                 (worst, worst_j) = (0.0, 0);
                 for j in 0..MC {
                     gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
-                    let n2: f64 = gr[j][..wd].iter().map(|v| v * v).sum();
-                    e2_s[j] = extent2::<S>(&xm[..wd]);
-                    inv_s[j] = inverse_scale(n2, e2_s[j]);
+                    (inv_s[j], e2_s[j]) = member_scale::<S>(&gr[j][..wd], &xm[..wd]);
                     at_s[j] = xm;
                     let r = gv[j].abs() * inv_s[j];
                     if !(r <= worst) {

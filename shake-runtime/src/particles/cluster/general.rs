@@ -3,7 +3,8 @@
 //! each cluster gathered into a local copy and solved by exact Newton.
 
 use super::*;
-use crate::tolerance::{inverse_scale, relative_dot, HIDDEN_LIMIT};
+use crate::particles::stencil::member_scale;
+use crate::tolerance::{relative_dot, HIDDEN_LIMIT};
 
 pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
 
@@ -242,8 +243,7 @@ pub(super) fn shake_one<S: Stencil>(
             let g = if fresh {
                 let gj = &mut l.gr[j * wd..(j + 1) * wd];
                 let g = stencil.gradient(&l.xm[..wd], data, gj);
-                let n2: f64 = gj.iter().map(|v| v * v).sum();
-                inv_s[j] = inverse_scale(n2, extent2::<S>(&l.xm[..wd]));
+                inv_s[j] = member_scale::<S>(gj, &l.xm[..wd]).0;
                 g
             } else {
                 stencil.value(&l.xm[..wd], data)

@@ -21,7 +21,6 @@ pub(crate) use super::plan::{
     ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters, MAX_CLUSTER,
     MAX_CLUSTER_COORDS,
 };
-use super::stencil::extent2;
 use super::system::{ClusterKernel, Family};
 use super::{Stencil, Table};
 use crate::tolerance::HIDDEN_LIMIT;
