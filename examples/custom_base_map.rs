@@ -22,7 +22,7 @@
 //!    fourth-order method on M^H is RATTLE *composed* (Section 4,
 //!    [`Composition`]), shown in the last column over φ_h.
 //!
-//! `tests/custom_base_map.rs` includes this file and checks these orders
+//! `tests/suite/custom_base_map.rs` includes this file and checks these orders
 //! and the symplecticity of RATTLE over φ_h on M^H. The reference solutions
 //! come from the workspace's test kit (`shake_testkit::reference`); the
 //! base map needs nothing but `shake`.

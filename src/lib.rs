@@ -14,7 +14,7 @@
 //! so the paper's results (symplecticity on Mᴴ, order 2, no drift in H̃) hold
 //! as they are. Details in `docs/non_autonomous.md`; a worked example in
 //! `examples/forced_pendulum.rs`; a convergence test against an independent
-//! solution in `tests/forced_pendulum.rs`.
+//! solution in `tests/suite/forced_pendulum.rs`.
 //!
 //! ```
 //! use shake::prelude::*;

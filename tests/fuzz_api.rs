@@ -41,7 +41,8 @@
 // A NaN must fail every bound: the negated comparisons are the point.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-mod common;
+// The test kit under the name the tests use (`common::models`, …).
+use shake_testkit as common;
 
 use common::models::*;
 use proptest::prelude::*;

@@ -586,7 +586,7 @@ fn friendly_errors() {
 /// Parameters named as in the mathematics are accepted, in the scalar and
 /// the particle form: the fields keep the names, `new`'s arguments do not
 /// (an argument `L` would be a pattern if a constant `L` is in scope).
-/// `tests/capitalised_parameters.rs` compiles and runs such systems.
+/// `tests/suite/capitalised_parameters.rs` compiles and runs such systems.
 #[test]
 fn capitalised_parameters_are_fields_not_arguments() {
     let cases = [

@@ -334,7 +334,7 @@ impl Trajectory {
     /// (for SHAKE σ = 0 and λ is all of it). Each half alone is off the
     /// exact multiplier by O(h), with opposite signs; the symmetric sum is
     /// O(h²) for a symmetric second-order base map (Störmer–Verlet,
-    /// implicit midpoint): `tests/constraint_forces.rs` shows the error
+    /// implicit midpoint): `tests/suite/constraint_forces.rs` shows the error
     /// ratio 4 when h is halved on the pendulum. g_q is evaluated with the
     /// system's `constraint_jacobian` at the stored state (for constraints
     /// that depend on p, −g_qᵀλ_c is the force on p and g_pᵀλ_c the

@@ -4,7 +4,7 @@
 //! reference of [`crate::reference`].
 //!
 //! Nothing here draws or keeps the claims table: the `paper` scenes
-//! (`hopf_free.rs`, `hopf_gravity.rs`) and `tests/paper_hopf.rs` both use
+//! (`hopf_free.rs`, `hopf_gravity.rs`) and `tests/suite/paper_hopf.rs` both use
 //! this module, so the figure, the claims table and the tests measure the same
 //! quantities against the same bounds.
 //!

@@ -6,7 +6,7 @@
 //! structurally nonzero entries of its outputs (the contract of
 //! `shake_runtime::system`: column-major, q-columns first). Their
 //! derivatives are checked against finite differences in
-//! `tests/runtime_models.rs`.
+//! `tests/suite/runtime_models.rs`.
 //!
 //! Conventions (MISSION.md): X_F = (F_p, −F_q), {F,G} = F_q·G_p − F_p·G_q,
 //! hidden constraints {g_i, H}, N_ij = {{H,g_i},g_j}.

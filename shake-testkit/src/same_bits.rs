@@ -1,5 +1,5 @@
 //! Bit-for-bit equality of two trajectories, for the file round trips
-//! (tests/trajectory_csv.rs, tests/trajectory_arrow.rs).
+//! (tests/suite/trajectory_csv.rs, tests/trajectory_arrow.rs).
 
 use shake::Trajectory;
 

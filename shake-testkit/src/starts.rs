@@ -1,5 +1,5 @@
 //! Moving states on M for the tests that compare two ways of taking the
-//! same steps (`tests/fast_paths.rs`, `tests/run_lane.rs`): generic
+//! same steps (`tests/suite/fast_paths.rs`, `tests/suite/run_lane.rs`): generic
 //! enough that no coordinate or velocity is zero by symmetry.
 
 use shake::State;

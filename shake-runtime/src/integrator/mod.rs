@@ -183,7 +183,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// analytic Jacobian, a projection by one linear solve, and one
     /// factorisation of N per step for the checks and the projection.
     /// `false` takes the general path everywhere; both give the same steps
-    /// to round-off (`tests/fast_paths.rs`).
+    /// to round-off (`tests/suite/fast_paths.rs`).
     ///
     /// ```
     /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
@@ -206,7 +206,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// their own size (with N a number for one constraint). `false` keeps
     /// the classical path on the workspace's vectors; both give the same
     /// steps to round-off, and to the bit for two to eight constraints
-    /// (`tests/fast_paths.rs`).
+    /// (`tests/suite/fast_paths.rs`).
     ///
     /// ```
     /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};

@@ -15,7 +15,7 @@
 //! with no `on_step` observer and no diagnostics, loops inside that step
 //! (`lane`) and comes back here only to end:
 //! the same steps and stored states, without the layers between this
-//! loop and the substep (`tests/run_lane.rs`).
+//! loop and the substep (`tests/suite/run_lane.rs`).
 
 mod event;
 pub(crate) mod lane;

@@ -7,7 +7,7 @@
 //! stack arrays of those sizes, one constraint with N and SHAKE's Jacobian
 //! as numbers (`check_one`), two to eight with N and its factors on the
 //! stack (`check_few`). The same checks in the same order, so the same
-//! steps (`tests/fast_paths.rs`: the same bits where the kernels are).
+//! steps (`tests/suite/fast_paths.rs`: the same bits where the kernels are).
 //!
 //! The sizes reach the step through [`ConstrainedSystem::with_sizes`]:
 //! [`Substep`] is a [`SizeVisitor`]. A wrapper around a system (one that

@@ -4,7 +4,7 @@
 //! buffer the map needs, so that a second one (the reverse check's) runs
 //! beside the first without touching it.
 //!
-//! Two paths compute the same map (to round-off, `tests/fast_paths.rs`):
+//! Two paths compute the same map (to round-off, `tests/suite/fast_paths.rs`):
 //! the general one, a Newton iteration on λ through the base map and the
 //! fibre flow (`crate::shake`), and the classical one for holonomic
 //! constraints, a separable H with constant mass matrix and a

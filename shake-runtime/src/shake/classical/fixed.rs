@@ -5,7 +5,7 @@
 //!
 //! The map is the slice path's (the parent module): the same kick, the
 //! same Newton iteration on λ and the same Π, so it gives the same steps
-//! to round-off (`tests/fast_paths.rs`; the same bits for a constraint of
+//! to round-off (`tests/suite/fast_paths.rs`; the same bits for a constraint of
 //! degree ≤ 2, [`ConstrainedSystem::quadratic_constraints`], whose first
 //! iterate both paths take as the root of g's exact quadratic along
 //! SHAKE's line, `quadratic_root`). What differs is where the numbers

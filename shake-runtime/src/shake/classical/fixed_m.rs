@@ -7,7 +7,7 @@
 //! computed with the same operations in the same order (the same kick,
 //! residual, Jacobian from the same list of terms, the same banded LU
 //! kernels, the same stopping rules), so it gives the same steps to the
-//! last bit (`tests/fast_paths.rs`). What moves to the stack is SHAKE's
+//! last bit (`tests/suite/fast_paths.rs`). What moves to the stack is SHAKE's
 //! Newton iteration (λ, r, q1, Δ and the m×m Jacobian), N with its factors,
 //! and Π's σ: arrays whose lengths the compiler knows, so the loops over
 //! them unroll and the generated derivatives inline with their sizes. Both

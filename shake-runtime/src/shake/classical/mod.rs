@@ -27,7 +27,7 @@
 //! taken, with the Jacobian in hand, before the iteration ends (the
 //! confirming update). Stopping without it left the double pendulum's
 //! SHAKE step 67ε from the classical formulas at h = 0.05, against 12ε
-//! with it (`tests/classical_agrees.rs`, the paper's claim 2).
+//! with it (`tests/suite/classical_agrees.rs`, the paper's claim 2).
 //! Stagnation at the noise floor with a fresh Jacobian stops it too. It
 //! does not stop on the contraction rate alone (θ/(1−θ)‖Δ_k‖ below the
 //! tolerance, Hairer & Wanner, *Solving ODEs II*, IV.8): that too saves

@@ -14,7 +14,7 @@
 //! watching each step: `run::lane`), and the general path
 //! (`fast_paths(false)`: base map and fibre flow through Newton).
 
-mod common;
+use crate::common;
 
 use common::reference as r;
 use nalgebra::DVector;

@@ -1,15 +1,12 @@
 //! A large-system step allocates nothing: every buffer is made by
 //! `Rattle::new` (cluster, band and sparse paths, with and without forces).
 
-mod common;
+use crate::common;
 
-use common::alloc::{allocations, Counting};
+use common::alloc::allocations;
 use shake::runtime::particles::{
     generate, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
 };
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 fn allocations_per_50_steps(
     system: ParticleSystem,

@@ -17,7 +17,7 @@
 //! Tiny steps: h = 1e-8 … 1e-12 are well-posed; a run must not refuse them
 //! (no fibre jump, no non-convergence), and its states stay on M.
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use shake::{

@@ -2,7 +2,7 @@
 //! a system that fits both, its three linear solvers against each other,
 //! and the exact discrete solution of RATTLE for a free rigid dimer.
 
-mod common;
+use crate::common;
 
 use common::models::DoublePendulum;
 use shake::runtime::particles::{

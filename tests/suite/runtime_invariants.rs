@@ -10,7 +10,7 @@
 //! times the size of the state and the conditioning of the Newton matrices;
 //! SHAKE's hidden residual is O(h), checked by halving h.
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use shake::{

@@ -32,7 +32,7 @@
 //! on Newton's basin, which a change of the solver may move a little), and
 //! any typed step error beyond it.
 
-mod common;
+use crate::common;
 
 use common::reference as oracle;
 use shake::models::{DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum};

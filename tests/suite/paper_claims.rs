@@ -8,7 +8,7 @@
 //! (every implicit equation is solved to stagnation); "O(h^p)" claims are
 //! checked through observed orders or ratios under halving h.
 
-mod common;
+use crate::common;
 
 use common::reference as r;
 use nalgebra::DVector;

@@ -5,7 +5,7 @@
 //! functions; checked at 1e-7), the brackets against their definitions, and
 //! the storage contract (only pattern entries written, fibre flow = kick).
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use shake::{ConstrainedSystem, FibreFlow};

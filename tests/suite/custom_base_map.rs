@@ -9,17 +9,17 @@
 //!   it composed by the triple jump has order 4 (reference: the angle ODE by
 //!   RK4 at a tiny step, independent code). Observed orders log2(e(h)/e(h/2))
 //!   over h = 0.05, 0.025, 0.0125, accepted within ±0.15 as in
-//!   `tests/runtime_convergence.rs`;
+//!   `tests/suite/runtime_convergence.rs`;
 //! - symplecticity (Proposition 4.4, Corollary 4.6): ω(DR u, DR v) = ω(u, v)
 //!   on TM^H for RATTLE, ω preserved on TM for SHAKE, by sixth-order central
 //!   differences with δ = 1e-3 (accurate to ~1e-11; checked at 1e-9, as in
-//!   `tests/runtime_symplectic.rs`).
+//!   `tests/suite/runtime_symplectic.rs`).
 
 // The example as a module: its base map and the error drivers whose table
 // it prints, so that what it shows is what is checked here. Its `main` and
 // table formatting are not called.
 #[allow(dead_code)]
-#[path = "../examples/custom_base_map.rs"]
+#[path = "../../examples/custom_base_map.rs"]
 mod example;
 
 use example::{free_error, rattle_error, Yoshida4};

@@ -12,7 +12,7 @@
 //! midpoint and Störmer–Verlet (RATTLE over a symmetric map is symmetric);
 //! we accept ±0.15 around it (the O(h) correction to the ratio at these h).
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use common::reference as oracle;

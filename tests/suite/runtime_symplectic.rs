@@ -12,7 +12,7 @@
 //! Each check can fail: the same test for a generic u, v ∉ TM must (and does)
 //! find ω not preserved by SHAKE, whose image lies in a submanifold.
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use nalgebra::{DMatrix, DVector};

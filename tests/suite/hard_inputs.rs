@@ -32,7 +32,7 @@
 //!   O(ε) and SHAKE's Newton at h = 0.1 has no nearby root: a typed
 //!   NewtonNotConverged at step 1.
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use shake::{

@@ -5,7 +5,7 @@
 //! keeps |g| at round-off (SHAKE and RATTLE), |{g,H}| at round-off
 //! (RATTLE), Π∘Sᵏ = Π∘Rᵏ, and RATTLE over a symmetric map is reversible.
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use proptest::prelude::*;

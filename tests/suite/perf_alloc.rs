@@ -4,17 +4,14 @@
 //! base map, SHAKE and RATTLE. Counted with a global allocator wrapper, as
 //! in `runtime_alloc.rs` (which counts single `step_in_place` calls).
 
-mod common;
+use crate::common;
 
-use common::alloc::{allocations, Counting};
+use common::alloc::allocations;
 use shake::models::{Chain8, HopfGravity, Pendulum};
 use shake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet,
     SymplecticEuler,
 };
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 /// Allocations of one run of `steps` steps that stores its first and last
 /// state only (stride = steps).

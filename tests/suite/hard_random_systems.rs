@@ -198,7 +198,7 @@ proptest! {
 /// sees it. The reverse check (`Options::reverse_tolerance`) refuses the
 /// step, and so does the round-off bound on g after
 /// a step (the jumped substep's Newton stops at 3.6e-13). The property
-/// `check` above passes on this case now. (`tests/hard_degenerate.rs`
+/// `check` above passes on this case now. (`tests/suite/hard_degenerate.rs`
 /// has a jump that only the reverse check sees.)
 #[test]
 fn a_triple_jump_step_that_jumps_branch_in_the_quadratic_family_is_refused() {

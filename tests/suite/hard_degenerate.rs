@@ -54,7 +54,7 @@
 //! the step that would cross it is refused by one of them or Newton fails
 //! to converge; which one fires depends on h (recorded in the output).
 
-mod common;
+use crate::common;
 
 use common::models::SignChange;
 use common::reference as oracle;

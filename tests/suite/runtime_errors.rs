@@ -2,7 +2,7 @@
 //! its typed error, with the numbers that explain it, and — from `run` —
 //! with the trajectory computed before it: nothing is lost.
 
-mod common;
+use crate::common;
 
 use common::models::*;
 use shake::{

@@ -4,7 +4,7 @@
 //! from: round-off where the quantity is exact, O(h^k) where a method of
 //! order k is involved.
 
-mod common;
+use crate::common;
 
 use common::reference::*;
 use nalgebra::DVector;

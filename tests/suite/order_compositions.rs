@@ -48,7 +48,7 @@
 //! ones too), that composed steps are symmetric, and that a backward run
 //! has the same order.
 
-mod common;
+use crate::common;
 
 use common::reference as oracle;
 use nalgebra::DVector;

@@ -9,7 +9,7 @@
 //! build; none of the bounds depends on the length of a run except where the
 //! bound says so (steps·ε).
 
-mod common;
+use crate::common;
 
 use common::reference;
 use shake_testkit::hopf_lab;

@@ -3,17 +3,14 @@
 //! `step_in_place` calls, for every base map and every kind of fibre flow
 //! (closed form, the runtime's kick, matrix exponential, GBS integration).
 
-mod common;
+use crate::common;
 
-use common::alloc::{allocations, Counting};
+use common::alloc::allocations;
 use common::models::*;
 use shake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet,
     SymplecticEuler,
 };
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 fn allocations_per_100_steps<S: ConstrainedSystem + Clone, B: BaseMap>(
     sys: S,

@@ -7,7 +7,7 @@
 //! Checked against independent references:
 //! - with k = 0 the system is two Hopf systems with gravity: the m = 2 run
 //!   must be the pair of m = 1 runs (the paper's Section 5.4 scene, whose
-//!   accuracy `tests/paper_hopf.rs` checks against its own reference),
+//!   accuracy `tests/suite/paper_hopf.rs` checks against its own reference),
 //!   step by step, to round-off;
 //! - with k ≠ 0: every state on M and M^H to round-off; the global error
 //!   at T = 1 against a reference computed by the triple jump (order 4) at
