@@ -25,7 +25,7 @@ use crate::linalg::{
     all_finite, band_lu_factor, band_lu_solve, dense_lu_factor, dense_lu_solve,
     full_band_lu_factor, full_band_lu_solve, lu_det, norm_inf, Band,
 };
-use crate::newton::NewtonOptions;
+use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::rattle::{estimate_inverse, FactorN, NondegeneracyCheck};
 use crate::shake::{ShakeReport, Workspace};
 use crate::system::ConstrainedSystem;
@@ -320,35 +320,32 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
     let mut jac = [[0.0; M]; M];
     let mut piv = [0usize; M];
     let band: Band = ws.jac_band;
-    let mut iterations = 0;
+    let mut mon = Monitor::new(*opts);
     let mut fresh = true;
-    let mut prev = f64::INFINITY;
-    let mut refreshed = false;
     let mut need_jacobian = true;
-    let mut lambda_noise = 0.0;
     let mut r_first = 0.0;
     let not_finite =
         |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
     let outcome = loop {
         let r = norm_inf(&it.r);
         if !(r.is_finite() && all_finite(&it.r) && all_finite(&it.dq)) {
-            break Err(not_finite(iterations));
+            break Err(not_finite(mon.iterations));
         }
         // At round-off: the confirming update (`shake::classical::shake_step`).
         let at_floor = r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f);
-        if at_floor && (r == 0.0 || need_jacobian || iterations >= opts.max_iterations) {
+        if at_floor && (r == 0.0 || need_jacobian || mon.exhausted()) {
             break Ok(());
         }
-        if iterations >= opts.max_iterations {
+        if mon.exhausted() {
             break Err(StepError::from_solve(
                 Stage::Shake,
                 SolveError::NotConverged {
-                    iterations,
+                    iterations: mon.iterations,
                     residual: r,
                 },
             ));
         }
-        if iterations == 0 {
+        if mon.iterations == 0 {
             r_first = r;
         }
         if need_jacobian {
@@ -369,46 +366,39 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             *l -= dl;
         }
         let (step, size) = (norm_inf(&delta), norm_inf(&lambda));
-        if iterations == 0 {
+        if mon.iterations == 0 {
             lambda_first = lambda;
+            // λ's round-off level (`shake::classical::shake_step`).
+            mon.set_floor(step / r_first * norm_inf(&floor));
         }
-        iterations += 1;
+        let verdict = mon.update_frozen(step, size, fresh);
         let cl = &ws.classical;
         it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &cl.g0, &cl.pattern, Some(&lambda));
         if !(step.is_finite() && size.is_finite()) {
-            break Err(not_finite(iterations));
+            break Err(not_finite(mon.iterations));
         }
         if at_floor {
             break Ok(());
         }
-        if iterations == 1 {
-            lambda_noise = step / r_first * norm_inf(&floor);
-        }
-        let tol = (opts.step_tolerance * size).max(lambda_noise);
-        let theta = step / prev;
-        prev = step;
-        if step <= tol {
-            break Ok(());
-        }
-        if theta > 0.5 && step <= opts.stagnation_threshold * size.max(1.0) && (fresh || refreshed)
-        {
-            break Ok(());
-        }
-        fresh = false;
-        if theta > 0.25 {
-            let at = (&mut ws.classical, &mut ws.g_z_1[..], band, ws.groups);
-            let z = (&q0, &p0, &it.q1);
-            if let Err(e) = jacobian(sys, h, z, at, &mut jac, &mut piv, iterations) {
-                break Err(e);
+        // The one stopping rule of simplified Newton (`newton`).
+        match verdict {
+            Verdict::Converged => break Ok(()),
+            Verdict::Continue => fresh = false,
+            Verdict::Refresh => {
+                let at = (&mut ws.classical, &mut ws.g_z_1[..], band, ws.groups);
+                let z = (&q0, &p0, &it.q1);
+                if let Err(e) = jacobian(sys, h, z, at, &mut jac, &mut piv, mon.iterations) {
+                    break Err(e);
+                }
+                fresh = true;
             }
-            fresh = true;
-            refreshed |= step <= opts.stagnation_threshold * size.max(1.0);
         }
     };
     // As the slice path leaves them, whether SHAKE converged or not: the
     // last residual and λ (and λ's first iterate once there was one).
     ws.g.copy_from_slice(&it.r);
     ws.lambda.copy_from_slice(&lambda);
+    let iterations = mon.iterations;
     if iterations > 0 {
         ws.lambda_first.copy_from_slice(&lambda_first);
     }
