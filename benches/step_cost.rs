@@ -119,8 +119,8 @@ fn pendulums(c: &mut Criterion) {
         0.01,
         &z0,
     );
-    let gen = shake::models::SphericalPendulum::new(1.0, 1.0);
-    steps(&mut g, "generated", gen, StormerVerlet, 0.01, &z0);
+    let generated = shake::models::SphericalPendulum::new(1.0, 1.0);
+    steps(&mut g, "generated", generated, StormerVerlet, 0.01, &z0);
     let ad = Ad::new(SphericalG {
         length: 1.0,
         gravity: 1.0,
@@ -144,8 +144,8 @@ fn hopf(c: &mut Criterion) {
         0.1,
         &z0,
     );
-    let gen = shake::models::HopfGravity::new(0.0, -1.0, 1.0);
-    steps(&mut g, "generated", gen, ImplicitMidpoint, 0.1, &z0);
+    let generated = shake::models::HopfGravity::new(0.0, -1.0, 1.0);
+    steps(&mut g, "generated", generated, ImplicitMidpoint, 0.1, &z0);
     let ad = Ad::new(HopfG {
         gravity: [0.0, -1.0],
         radius2: 1.0,

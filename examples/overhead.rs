@@ -310,7 +310,7 @@ fn memory() {
 fn main() {
     // `OVERHEAD_ONLY=chain_16` measures one system (for profiling).
     let only = std::env::var("OVERHEAD_ONLY").ok();
-    let want = |name: &str| only.as_deref().map_or(true, |o| o == name);
+    let want = |name: &str| only.as_deref().is_none_or(|o| o == name);
     if want("pendulum") {
         print("pendulum", &pendulum(20_000));
     }

@@ -100,8 +100,8 @@ fn main() {
                 },
                 $steps,
             );
-            let gen = $gen.map(|g| chain_row($n, g, $steps));
-            let growth = match (prev, gen) {
+            let generated = $gen.map(|g| chain_row($n, g, $steps));
+            let growth = match (prev, generated) {
                 (Some((pn, pt)), Some(g)) => format!("{:.2} (N × {})", g.0 / pt, $n / pn),
                 _ => "—".into(),
             };
@@ -110,12 +110,12 @@ fn main() {
                 "| {} | {} | {} | {} | {} | {} |",
                 $n,
                 us(hand.0),
-                cell(gen.map(|g| g.0)),
+                cell(generated.map(|g| g.0)),
                 us(hand.1),
-                cell(gen.map(|g| g.1)),
+                cell(generated.map(|g| g.1)),
                 growth
             );
-            if let Some(g) = gen {
+            if let Some(g) = generated {
                 prev = Some(($n, g.0));
             }
         }};

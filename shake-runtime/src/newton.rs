@@ -30,7 +30,7 @@
 //! It converges linearly, with a ratio of the order of the Jacobian's
 //! change over the step (O(‖λ‖) = O(h)) — in practice one or two more
 //! iterations, each far cheaper. Its stopping rule
-//! ([`Monitor::update_frozen`]) keeps rule 1, and keeps iterating while the
+//! (`Monitor::update_frozen`) keeps rule 1, and keeps iterating while the
 //! updates at least quarter (fast linear contraction). Any other update
 //! asks the caller for a Jacobian at the current iterate: a slowing
 //! contraction and rounding noise cannot be told apart from the update
@@ -47,9 +47,9 @@
 //! is recognised without a coin toss on every refresh.
 //!
 //! A caller that knows the round-off level of x itself (classical SHAKE:
-//! the floor of g seen through J⁻¹, [`Monitor::set_floor`]) stops on an
+//! the floor of g seen through J⁻¹, `Monitor::set_floor`) stops on an
 //! update below it as on rule 1; a caller that moves x by a closed-form
-//! root between updates records it with [`Monitor::jump`]. Every SHAKE
+//! root between updates records it with `Monitor::jump`. Every SHAKE
 //! kernel (the general one and the classical ones, slice and fixed-size)
 //! stops by this one rule.
 

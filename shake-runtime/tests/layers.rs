@@ -363,12 +363,12 @@ impl Crate {
             });
         }
         for u in module.uses.iter().filter(|u| u.glob) {
-            if let (Res::Module(g), true) = self.resolve_in(m, &u.path, stack) {
-                if g != m {
-                    let (r, found) = self.walk(&g, rest, stack);
-                    if found {
-                        return Some((r, true));
-                    }
+            if let (Res::Module(g), true) = self.resolve_in(m, &u.path, stack)
+                && g != m
+            {
+                let (r, found) = self.walk(&g, rest, stack);
+                if found {
+                    return Some((r, true));
                 }
             }
         }

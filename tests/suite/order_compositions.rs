@@ -114,7 +114,7 @@ fn observed_orders(steps: &[f64], e: &[f64]) -> (Vec<f64>, f64, usize) {
     let pts: Vec<(f64, f64)> = steps
         .iter()
         .zip(e)
-        .filter(|(_, &x)| x >= 1e-11)
+        .filter(|&(_, &x)| x >= 1e-11)
         .map(|(&h, &x)| (h.ln(), x.ln()))
         .collect();
     let pairs = pts

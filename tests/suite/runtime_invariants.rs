@@ -355,7 +355,7 @@ fn numerical_and_closed_form_fibre_flows_agree() {
     // Hopf: the runtime's exponential, its GBS integration and the closed
     // rotation z_k ↦ e^{−2iλ} z_k agree to round-off.
     let sys = Hopf::gravity();
-    let (mut lin, mut gen) = (
+    let (mut lin, mut generated) = (
         FibreFlow::new(&NoClosedForm(sys)),
         FibreFlow::new(&AsGeneral(sys)),
     );
@@ -368,7 +368,7 @@ fn numerical_and_closed_form_fibre_flows_agree() {
         let (bq, bp) = b.split_at_mut(2);
         lin.apply(&NoClosedForm(sys), &[lambda], bq, bp).unwrap();
         let (cq, cp) = c.split_at_mut(2);
-        gen.apply(&AsGeneral(sys), &[lambda], cq, cp).unwrap();
+        generated.apply(&AsGeneral(sys), &[lambda], cq, cp).unwrap();
         let (s, co) = (2.0 * lambda).sin_cos();
         let want = [
             co * z[0] + s * z[2],

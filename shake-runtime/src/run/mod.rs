@@ -477,8 +477,8 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 if f(&event).is_break() {
                     // Stopped by the observer: the trajectory ends at the
                     // state it saw.
-                    if !on_stride {
-                        if let Err(e) = integ.record(
+                    if !on_stride
+                        && let Err(e) = integ.record(
                             &q,
                             &p,
                             per_step,
@@ -489,9 +489,9 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                             store,
                             &mut observer,
                             &mut scratch,
-                        ) {
-                            return fail(traj, e);
-                        }
+                        )
+                    {
+                        return fail(traj, e);
                     }
                     break;
                 }

@@ -191,16 +191,18 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
     // its first pass: there it made the step 20 % slower.)
     let g_qq = &ws.classical.g_qq;
     let mut solved = false;
-    if !g_qq.is_empty() && r.is_finite() && r.abs() > floor {
-        if let Some((root, first, r1)) = quadratic_root(sys, h, (&q0, &p0, &g0), &q1, r, g_qq) {
-            r_first = r.abs();
-            inv_j = 1.0 / r1;
-            (lambda, lambda_first) = (root, first);
-            mon.jump((root - first).abs());
-            (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(root));
-            fresh = false;
-            solved = r.abs() <= floor && dq.iter().all(|x| x.is_finite());
-        }
+    if !g_qq.is_empty()
+        && r.is_finite()
+        && r.abs() > floor
+        && let Some((root, first, r1)) = quadratic_root(sys, h, (&q0, &p0, &g0), &q1, r, g_qq)
+    {
+        r_first = r.abs();
+        inv_j = 1.0 / r1;
+        (lambda, lambda_first) = (root, first);
+        mon.jump((root - first).abs());
+        (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(root));
+        fresh = false;
+        solved = r.abs() <= floor && dq.iter().all(|x| x.is_finite());
     }
     if !solved {
         loop {

@@ -298,16 +298,17 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     let mut solved = false;
     if m == 1 && !ws.classical.g_qq.is_empty() {
         let (r0, floor) = (ws.g[0], ws.classical.floor[0]);
-        if r0.is_finite() && r0.abs() > floor {
-            if let Some((root, first, r1)) = first_iterate(sys, h, ws) {
-                r_first = r0.abs();
-                (ws.jac[0], ws.piv_j[0], need_jacobian) = (1.0 / r1, 0, false);
-                (ws.lambda[0], ws.lambda_first[0]) = (root, first);
-                mon.jump((root - first).abs());
-                residual(sys, h, ws, false);
-                fresh = false;
-                solved = ws.g[0].abs() <= floor && all_finite(&ws.dz[..d]);
-            }
+        if r0.is_finite()
+            && r0.abs() > floor
+            && let Some((root, first, r1)) = first_iterate(sys, h, ws)
+        {
+            r_first = r0.abs();
+            (ws.jac[0], ws.piv_j[0], need_jacobian) = (1.0 / r1, 0, false);
+            (ws.lambda[0], ws.lambda_first[0]) = (root, first);
+            mon.jump((root - first).abs());
+            residual(sys, h, ws, false);
+            fresh = false;
+            solved = ws.g[0].abs() <= floor && all_finite(&ws.dz[..d]);
         }
     }
     loop {
