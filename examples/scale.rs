@@ -27,7 +27,7 @@
 
 use std::time::Instant;
 
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
     Table,
 };

@@ -56,7 +56,7 @@
 /// Tolerances and limits of every Newton iteration of a step.
 ///
 /// ```
-/// use shake_runtime::NewtonOptions;
+/// use geoshake_runtime::NewtonOptions;
 /// let opts = NewtonOptions { max_iterations: 30, ..NewtonOptions::default() };
 /// assert_eq!(opts.step_tolerance, 4.0 * f64::EPSILON);
 /// ```

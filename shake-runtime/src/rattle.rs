@@ -386,7 +386,7 @@ pub(crate) fn factor_and_check(
 
 /// N read and ready to factorise, wherever it is held: in the workspace
 /// ([`read_n`] copied it into `ws.jac`) or on the stack (the fixed-size
-/// classical step, `shake::classical::fixed_m`). What
+/// classical step, `geoshake::classical::fixed_m`). What
 /// [`Guard::check_n`](crate::guard::Guard::check_n) needs of it.
 pub(crate) trait FactorN {
     /// N's order m.

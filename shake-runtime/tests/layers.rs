@@ -18,7 +18,7 @@
 //! `tests.rs`, `mod x;` declarations, visibilities (`pub(super)`) and doc
 //! comments are not imports.
 //!
-//! `cargo test --release -p shake-runtime --test layers -- --nocapture`
+//! `cargo test --release -p geoshake-runtime --test layers -- --nocapture`
 //! prints the files, the edges and the violations by layer pair.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -967,7 +967,7 @@ fn layers() {
     assert!(
         fail.is_empty(),
         "the layering of docs/engine.md is broken:\n{}\n(SHAKE_LAYERS_EDGES=1 cargo test --release \
-         -p shake-runtime --test layers -- --nocapture lists every import)",
+         -p geoshake-runtime --test layers -- --nocapture lists every import)",
         fail.join("\n")
     );
 }

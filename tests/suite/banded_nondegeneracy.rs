@@ -3,8 +3,8 @@
 //! computation with nalgebra: det N to round-off, and the 1-norm condition
 //! estimate within the factor such estimators guarantee.
 
+use geoshake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};
 use nalgebra::DMatrix;
-use shake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};
 use std::cell::RefCell;
 use std::ops::ControlFlow;
 
@@ -152,7 +152,7 @@ fn the_condition_in_a_run_never_falls_below_a_third_of_the_true_one() {
     let reported = RefCell::new(Vec::new());
     let kappas = RefCell::new(Vec::new());
     let steps = 2000;
-    let mut record = |e: &shake::StepEvent| {
+    let mut record = |e: &geoshake::StepEvent| {
         reported.borrow_mut().push(e.info.condition);
         ControlFlow::Continue(())
     };

@@ -3,13 +3,13 @@
 //! compile without a warning (this file denies them), `new` binds its
 //! arguments instead of matching them against the constants, and the
 //! systems keep |q| = L while they move under G. The same declaration read
-//! at run time (`shake::declared`) accepts the names too and takes the
+//! at run time (`geoshake::declared`) accepts the names too and takes the
 //! macro's steps.
 #![deny(warnings)]
 
-use shake::declared::DeclaredSystem;
-use shake::prelude::*;
-use shake::runtime::particles::{Options, ParticleState, Rattle};
+use geoshake::declared::DeclaredSystem;
+use geoshake::prelude::*;
+use geoshake::runtime::particles::{Options, ParticleState, Rattle};
 
 /// The caller's own constants, named like the parameters: an argument
 /// `L` of `new` would be a pattern matching this constant (E0005).

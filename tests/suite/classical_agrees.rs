@@ -2,7 +2,7 @@
 //! for one system: geometric SHAKE and RATTLE over Störmer–Verlet and
 //! symplectic Euler are the classical methods, so one step of the library
 //! and one step of the independent classical formulas
-//! (`shake_testkit::reference`, Newton on the full system in nalgebra)
+//! (`geoshake_testkit::reference`, Newton on the full system in nalgebra)
 //! agree to round-off from every state of a trajectory.
 //!
 //! The scene is the `paper` example's (the double pendulum of unit rods
@@ -17,9 +17,9 @@
 use crate::common;
 
 use common::reference as r;
+use geoshake::models::DoublePendulum;
+use geoshake::{BaseMap, Integrator, State, Stop, StormerVerlet, SymplecticEuler};
 use nalgebra::DVector;
-use shake::models::DoublePendulum;
-use shake::{BaseMap, Integrator, State, Stop, StormerVerlet, SymplecticEuler};
 
 const EPS: f64 = f64::EPSILON;
 const H: f64 = 0.05;

@@ -13,8 +13,8 @@
 //! halved; a force built from one half only falls by 2. Both are tested:
 //! the second shows the test can tell the orders apart.
 
-use shake::examples::Pendulum;
-use shake::{Integrator, Method, Options, Stop, StormerVerlet, Trajectory};
+use geoshake::examples::Pendulum;
+use geoshake::{Integrator, Method, Options, Stop, StormerVerlet, Trajectory};
 
 const GAMMA: f64 = 9.81;
 const L: f64 = 1.0;

@@ -23,14 +23,14 @@
 mod example;
 
 use example::{free_error, rattle_error, Yoshida4};
-use nalgebra::{DMatrix, DVector};
-use shake::models::Pendulum;
-use shake::runtime::examples::HarmonicOscillator;
-use shake::{
+use geoshake::models::Pendulum;
+use geoshake::runtime::examples::HarmonicOscillator;
+use geoshake::{
     Composition, ConstrainedSystem, Integrator, Method, Options, State, StormerVerlet,
     Unconstrained,
 };
-use shake_testkit::reference::pendulum_state;
+use geoshake_testkit::reference::pendulum_state;
+use nalgebra::{DMatrix, DVector};
 
 const STEPS: [f64; 3] = [0.05, 0.025, 0.0125];
 

@@ -1,4 +1,4 @@
-//! Systems declared at run time (`shake::declared`) against the same
+//! Systems declared at run time (`geoshake::declared`) against the same
 //! systems declared with the macro: the same steps, the same refusals.
 //!
 //! The tape evaluates each node with the operations, in the order, of the
@@ -6,9 +6,9 @@
 //! are compared to a few ulps of the state (any difference in the
 //! evaluation, a wrong sign or a missing term, is O(h) or O(1)).
 
-use shake::declared::{DeclareError, DeclaredSystem};
-use shake::models::{HopfGravity, Pendulum};
-use shake::{ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet};
+use geoshake::declared::{DeclareError, DeclaredSystem};
+use geoshake::models::{HopfGravity, Pendulum};
+use geoshake::{ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet};
 
 const PENDULUM: &str = "
 /// The planar pendulum (Example 1.3).
@@ -37,7 +37,7 @@ fn max_difference<A, B>(
 ) -> f64
 where
     A: ConstrainedSystem,
-    B: shake::BaseMap + Clone,
+    B: geoshake::BaseMap + Clone,
 {
     let (mut za, mut zb) = (
         a.project_to_hidden(z0).unwrap(),

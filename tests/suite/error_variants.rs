@@ -10,8 +10,8 @@
 //! first whose evaluations see the break (Newton's iterates stay within
 //! O(h²) of the states, far below the half step between them).
 
-use shake::models::Pendulum;
-use shake::{
+use geoshake::models::Pendulum;
+use geoshake::{
     ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, SolveError, Stage,
     State, StepError, Stop, StormerVerlet,
 };

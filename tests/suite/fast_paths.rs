@@ -13,7 +13,7 @@
 //! - a lazily projected run (stored states projected with the factors of N
 //!   the step already made) against the general run.
 
-use shake::{
+use geoshake::{
     BaseMap, ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, State, Stop,
     StormerVerlet, SymplecticEuler,
 };
@@ -31,7 +31,7 @@ fn tolerance(z: &State, h: f64) -> f64 {
     8.0 * EPS * scale * scale / h.abs().min(1.0)
 }
 
-shake::constrained_system! {
+geoshake::constrained_system! {
     /// Two rods of lengths 1 and 0.7 as in the double pendulum, with a
     /// kinetic energy that couples the two masses' momenta (a constant,
     /// non-diagonal mass matrix: SHAKE's Jacobian by column groups).
@@ -48,7 +48,7 @@ shake::constrained_system! {
 }
 
 fn double_start() -> State {
-    shake_testkit::starts::double_pendulum()
+    geoshake_testkit::starts::double_pendulum()
 }
 
 fn pendulum_start() -> State {
@@ -57,7 +57,7 @@ fn pendulum_start() -> State {
 
 /// A chain of 8 links at varied angles, moving.
 fn chain_start() -> State {
-    shake_testkit::starts::chain(8)
+    geoshake_testkit::starts::chain(8)
 }
 
 /// The bands the steps above are factorised in: a chain of 8 links takes
@@ -67,15 +67,15 @@ fn chain_start() -> State {
 /// the general path, where the predicted band would drop O(h²) terms.
 #[test]
 fn small_chains_are_banded_where_the_band_is_exact() {
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     let sv = Integrator::new(chain, StormerVerlet, 0.01);
     assert_eq!(sv.newton_bands(), [(1, 1), (1, 1)]);
     let euler = Integrator::new(chain, SymplecticEuler, 0.01);
     assert_eq!(euler.newton_bands(), [(1, 1), (1, 1)]);
-    let midpoint = Integrator::new(chain, shake::ImplicitMidpoint, 0.01);
+    let midpoint = Integrator::new(chain, geoshake::ImplicitMidpoint, 0.01);
     assert_eq!(midpoint.newton_bands(), [(7, 7), (1, 1)]);
     // Two constraints: the full band is the only one.
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
     let i = Integrator::new(double, StormerVerlet, 0.01);
     assert_eq!(i.newton_bands(), [(1, 1), (1, 1)]);
 }
@@ -107,8 +107,8 @@ fn compare_steps<S: ConstrainedSystem + Clone, B: BaseMap, T: ConstrainedSystem 
 
 #[test]
 fn the_classical_step_is_the_general_step() {
-    let pend = shake::models::Pendulum::new(1.0, 9.81);
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let pend = geoshake::models::Pendulum::new(1.0, 9.81);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     for rattle in [false, true] {
         for h in [0.01, 0.05] {
             let cases = [
@@ -169,7 +169,7 @@ fn the_classical_step_is_the_general_step() {
     }
 }
 
-shake::constrained_system! {
+geoshake::constrained_system! {
     /// A pendulum whose rod bends with its angle, g cubic in q: SHAKE's
     /// residual along its line is no quadratic, and Newton solves it.
     struct CubicRod {
@@ -186,9 +186,9 @@ shake::constrained_system! {
 /// cubic g has no closed form and iterates on both paths.
 #[test]
 fn one_distance_constraint_is_solved_in_closed_form() {
-    let pend = shake::models::Pendulum::new(1.0, 9.81);
-    let sphere = shake::models::SphericalPendulum::new(1.3, 9.81);
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let pend = geoshake::models::Pendulum::new(1.0, 9.81);
+    let sphere = geoshake::models::SphericalPendulum::new(1.3, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
     assert!(pend.quadratic_constraints() && sphere.quadratic_constraints());
     assert!(double.quadratic_constraints());
     assert!(!CubicRod::new().quadratic_constraints());
@@ -242,11 +242,11 @@ fn one_distance_constraint_is_solved_in_closed_form() {
 /// (one constraint of degree 2, two, eight).
 #[test]
 fn a_lazy_run_with_a_stride_shows_the_slice_path_states() {
-    let run = |sys: &dyn Fn(bool) -> shake::RunOutcome| (sys(true), sys(false));
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
-    let chain = shake::models::Chain8::new(1.0, 1.0);
-    let pend = shake::models::Pendulum::new(1.0, 9.81);
-    fn go<S: ConstrainedSystem + Clone>(sys: &S, z0: &State, fixed: bool) -> shake::RunOutcome {
+    let run = |sys: &dyn Fn(bool) -> geoshake::RunOutcome| (sys(true), sys(false));
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
+    let pend = geoshake::models::Pendulum::new(1.0, 9.81);
+    fn go<S: ConstrainedSystem + Clone>(sys: &S, z0: &State, fixed: bool) -> geoshake::RunOutcome {
         let mut i = Integrator::new(sys.clone(), StormerVerlet, 0.01)
             .fixed_size(fixed)
             .rattle()
@@ -343,8 +343,8 @@ impl<S: ConstrainedSystem> ConstrainedSystem for NonSeparable<S> {
 
 #[test]
 fn explicit_stormer_verlet_is_the_generalised_method() {
-    let pend = shake::models::Pendulum::new(1.0, 9.81);
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let pend = geoshake::models::Pendulum::new(1.0, 9.81);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     for rattle in [false, true] {
         let cases = [
             (
@@ -383,7 +383,7 @@ fn explicit_stormer_verlet_is_the_generalised_method() {
 
 #[test]
 fn a_lazily_projected_run_is_the_general_run() {
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     let h = 0.01;
     for stride in [1, 7] {
         let mut fast = Integrator::new(chain, StormerVerlet, h).rattle();
@@ -414,15 +414,15 @@ fn a_lazily_projected_run_is_the_general_run() {
 }
 
 /// A system of one constraint declared with `constrained_system!` steps on
-/// stack arrays of its own size (`shake::classical::fixed`); the same classical
+/// stack arrays of its own size (`geoshake::classical::fixed`); the same classical
 /// step on the workspace's vectors (`fixed_size(false)`) is the reference.
 /// Single steps from the states of a run, whole runs (Kahan's carry, lazy
 /// and per-step projection), and the failure of a step too large to
 /// converge: the same states to round-off, the same error at the same step.
 #[test]
 fn the_fixed_size_step_is_the_slice_step() {
-    let pend = shake::models::Pendulum::new(1.0, 9.81);
-    let sphere = shake::models::SphericalPendulum::new(1.3, 9.81);
+    let pend = geoshake::models::Pendulum::new(1.0, 9.81);
+    let sphere = geoshake::models::SphericalPendulum::new(1.3, 9.81);
     let sphere_start = State::from_slices(&[0.6, 0.3, -(1.69f64 - 0.45).sqrt()], &[0.4, -0.9, 0.0]);
     fn both<S: ConstrainedSystem + Clone, B: BaseMap>(
         sys: S,
@@ -449,9 +449,9 @@ fn the_fixed_size_step_is_the_slice_step() {
         }
         // Whole runs, projected lazily (the default) and every step.
         for every in [false, true] {
-            let opts = shake::Options {
+            let opts = geoshake::Options {
                 project_every_step: every,
-                ..shake::Options::default()
+                ..geoshake::Options::default()
             };
             let (mut f, mut s) = (
                 make(true).with_options(opts),
@@ -496,12 +496,12 @@ fn the_fixed_size_step_is_the_slice_step() {
                 println!("{name}, rattle {rattle}, h {h}: worst / tolerance {worst:.3}");
                 assert!(worst <= 1.0, "{name}, rattle {rattle}, h {h}: {worst}");
             }
-            // Two to eight constraints (`shake::classical::fixed_m`): the
+            // Two to eight constraints (`geoshake::classical::fixed_m`): the
             // diagonal mass matrix's list of Jacobian terms, and a coupled
             // one's column groups.
-            let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+            let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
             let coupled = CoupledRods::new(0.3);
-            let chain = shake::models::Chain8::new(1.0, 1.0);
+            let chain = geoshake::models::Chain8::new(1.0, 1.0);
             let cases = [
                 (
                     "double pendulum SV",
@@ -549,9 +549,9 @@ fn the_fixed_size_step_is_the_slice_step() {
     // The same for two constraints (`fixed_m`) and for eight (the banded
     // kernels, SHAKE's Jacobian and N on the stack against the slice
     // path's), with the multipliers the failed step leaves.
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
     fails_alike("double pendulum", double, &double_start(), [2.0, 40.0]);
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     fails_alike("chain of 8", chain, &chain_start(), [2.0, 40.0]);
 }
 

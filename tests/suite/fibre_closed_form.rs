@@ -5,8 +5,8 @@
 //! the matrix-exponential path of a quadratic constraint that is not a
 //! rotation (one with a linear part), both to round-off.
 
-use shake::models::{HopfFree, HopfGravity};
-use shake::{constrained_system, FibreFlow};
+use geoshake::models::{HopfFree, HopfGravity};
+use geoshake::{constrained_system, FibreFlow};
 
 constrained_system! {
     /// The Hopf sphere shifted by a linear term: still quadratic, but with

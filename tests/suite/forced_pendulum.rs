@@ -18,7 +18,7 @@
 //! halving that step). RATTLE's error at T must then fall as h², the order of
 //! RATTLE over a second-order base map (the paper's Prop. 4.2 and 4.5).
 
-use shake::prelude::*;
+use geoshake::prelude::*;
 
 constrained_system! {
     /// A pendulum whose pivot oscillates vertically, in extended phase space.

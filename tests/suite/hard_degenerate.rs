@@ -58,8 +58,8 @@ use crate::common;
 
 use common::models::SignChange;
 use common::reference as oracle;
-use shake::models::HopfGravity;
-use shake::{Composition, ImplicitMidpoint, Integrator, Options, State, StepError, Stop};
+use geoshake::models::HopfGravity;
+use geoshake::{Composition, ImplicitMidpoint, Integrator, Options, State, StepError, Stop};
 
 const GV: [f64; 2] = [0.0, -1.0];
 
@@ -369,7 +369,7 @@ fn the_fold_indicator_is_h_over_the_time_left_before_n_is_singular() {
     let t_s = quarter_time(&z0, s0);
     for h in [0.01, 0.005] {
         let mut seen: Vec<(f64, f64)> = Vec::new();
-        let mut watch = |e: &shake::StepEvent| {
+        let mut watch = |e: &geoshake::StepEvent| {
             seen.push((e.t, e.info.fold));
             ControlFlow::Continue(())
         };
@@ -419,14 +419,14 @@ fn the_fold_indicator_is_h_over_the_time_left_before_n_is_singular() {
 /// and the reverse check allows for that distance (review of the check).
 #[test]
 fn a_start_off_m_within_the_tolerance_is_not_a_branch_jump() {
-    use shake::examples::Pendulum;
+    use geoshake::examples::Pendulum;
     let opts = Options {
         constraint_tolerance: 1e-3,
         ..Options::default()
     };
     let z0 = State::from_slices(&[0.6 * 1.0001, -0.8 * 1.0001], &[0.8, 0.6]);
     for c in [Composition::TRIPLE_JUMP, Composition::YOSHIDA_6] {
-        let mut integ = Integrator::new(Pendulum::default(), shake::StormerVerlet, 0.01)
+        let mut integ = Integrator::new(Pendulum::default(), geoshake::StormerVerlet, 0.01)
             .composed(c)
             .with_options(opts);
         let z1 = integ.step(&z0);

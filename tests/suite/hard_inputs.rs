@@ -35,7 +35,7 @@
 use crate::common;
 
 use common::models::*;
-use shake::{
+use geoshake::{
     Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, Stage, State, StepError, Stop,
     StormerVerlet, SymplecticEuler,
 };
@@ -118,7 +118,7 @@ fn huge_step_sizes_are_typed_errors_never_a_point_off_m() {
     match e {
         StepError::NewtonNotConverged {
             stage: Stage::Shake,
-            source: shake::SolveError::NotConverged { residual, .. },
+            source: geoshake::SolveError::NotConverged { residual, .. },
             ..
         } => assert!(residual > 1.0, "{residual:e}"),
         e => panic!("{e:?}"),

@@ -35,8 +35,8 @@
 use crate::common;
 
 use common::reference as oracle;
-use shake::models::{DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum};
-use shake::{
+use geoshake::models::{DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum};
+use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StepError, Stop,
     StormerVerlet,
 };

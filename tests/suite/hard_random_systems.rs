@@ -18,11 +18,11 @@
 //! RATTLE), and a RATTLE step over a symmetric base map is undone by the
 //! step at −h.
 
-use proptest::prelude::*;
-use shake::{
+use geoshake::{
     constrained_system, BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator,
     Options, State, StepError, Stop, StormerVerlet,
 };
+use proptest::prelude::*;
 
 constrained_system! {
     /// A random ellipse constraint with a random potential.

@@ -14,7 +14,7 @@
 //!   h/8 falls by 4 per halving of h (RATTLE's order 2); the energy error
 //!   too; one step taken back with −h returns (symmetry, Section 4).
 
-use shake::{
+use geoshake::{
     constrained_system, Composition, ConstrainedSystem, Hamiltonian, ImplicitMidpoint, Integrator,
     State, Stop, StormerVerlet,
 };

@@ -3,8 +3,8 @@
 //! (checked against a closed form computed here), not some other
 //! projection; q off M and p-dependent constraints are typed errors.
 
-use shake::examples::HopfHarmonic;
-use shake::prelude::*;
+use geoshake::examples::HopfHarmonic;
+use geoshake::prelude::*;
 
 constrained_system! {
     /// Two point masses joined by a rigid rod (a dumbbell in the plane).

@@ -2,10 +2,10 @@
 //! computes the same RATTLE steps as the library, to round-off: from each
 //! state of a library run, one step of each, compared. Not a timing test.
 
-use shake_testkit::bench::limit;
+use geoshake_testkit::bench::limit;
 
+use geoshake::{Integrator, State, StormerVerlet};
 use limit::{limit_chain_state, LimitChain, LimitPendulum};
-use shake::{Integrator, State, StormerVerlet};
 
 const H: f64 = 0.01;
 
@@ -17,7 +17,7 @@ fn tolerance(z: &State) -> f64 {
 
 #[test]
 fn the_limit_pendulum_takes_the_library_steps() {
-    let sys = shake::models::Pendulum::new(1.3, 9.81);
+    let sys = geoshake::models::Pendulum::new(1.3, 9.81);
     let lim = LimitPendulum {
         length: 1.3,
         gravity: 9.81,
@@ -37,7 +37,7 @@ fn the_limit_pendulum_takes_the_library_steps() {
 
 #[test]
 fn the_limit_chain_takes_the_library_steps() {
-    let sys = shake::models::Chain8::new(1.0, 1.0);
+    let sys = geoshake::models::Chain8::new(1.0, 1.0);
     let mut lim = LimitChain::<8>::new(1.0, 1.0);
     let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
     let (q0, p0) = limit_chain_state(8, 1.0);

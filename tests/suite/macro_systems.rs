@@ -1,7 +1,7 @@
 //! The paper's systems, declared with `constrained_system!`: they must
 //! compile, and their structural facts must be what the paper says.
 
-use shake::{constrained_system, ConstrainedSystem, ConstraintKind, Hamiltonian};
+use geoshake::{constrained_system, ConstrainedSystem, ConstraintKind, Hamiltonian};
 
 constrained_system! {
     /// Planar pendulum (the paper's Example 1.3).

@@ -9,9 +9,9 @@
 //! Generated and reference may differ only by round-off: the macro's
 //! canonical form reorders and expands the arithmetic.
 
+use geoshake::constrained_system;
+use geoshake::runtime::particles::{Stencil, Table, TopologyError};
 use num_dual::{Dual64, DualNum};
-use shake::constrained_system;
-use shake::runtime::particles::{Stencil, Table, TopologyError};
 
 constrained_system! {
     /// Rigid water: three distance constraints per molecule.

@@ -3,8 +3,8 @@
 //! stencil does: the generated stencil is a drop-in for the hand-written one
 //! on the whole path (topology checks, cluster solver, driver).
 
-use shake::constrained_system;
-use shake::runtime::particles::{generate, Options, ParticleState, Rattle};
+use geoshake::constrained_system;
+use geoshake::runtime::particles::{generate, Options, ParticleState, Rattle};
 
 constrained_system! {
     /// Rigid water: three distance constraints per molecule.

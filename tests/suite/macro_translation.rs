@@ -15,7 +15,7 @@
 //! untranslated and 1.2e-9 translated (3700 round-off units); factored
 //! emission 3.2e-15 and 5.4e-13 (2.7 and 1.7 units).
 
-use shake::{constrained_system, ConstrainedSystem, Integrator, State, StormerVerlet};
+use geoshake::{constrained_system, ConstrainedSystem, Integrator, State, StormerVerlet};
 
 constrained_system! {
     /// A free chain of 8 unit masses in the plane, 7 rigid links.

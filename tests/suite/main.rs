@@ -3,14 +3,14 @@
 //! build). Run one subject with `cargo test --release --test suite <module>::`.
 //!
 //! Allocation counts (the `*_alloc` modules) are per thread
-//! (`shake_testkit::alloc`), so the harness may run the other modules
+//! (`geoshake_testkit::alloc`), so the harness may run the other modules
 //! alongside them.
 
 #[global_allocator]
-static GLOBAL: shake_testkit::alloc::Counting = shake_testkit::alloc::Counting;
+static GLOBAL: geoshake_testkit::alloc::Counting = geoshake_testkit::alloc::Counting;
 
 // The test kit under the name the tests use (`common::models`, …).
-use shake_testkit as common;
+use geoshake_testkit as common;
 
 mod banded_nondegeneracy;
 mod capitalised_parameters;

@@ -14,8 +14,8 @@
 //! contract (an entry the oracle finds nonzero must be written) and, for
 //! g_z, that the written entries are exactly `JACOBIAN_PATTERN`.
 
+use geoshake::{constrained_system, ConstrainedSystem, ConstraintKind, Hamiltonian};
 use num_dual::{DualNum, HyperDual64};
-use shake::{constrained_system, ConstrainedSystem, ConstraintKind, Hamiltonian};
 
 /// Relative tolerance of the comparison.
 const RTOL: f64 = 1e-12;

@@ -1,7 +1,7 @@
 //! Observed orders 4, 6 and 8 of symmetric compositions of RATTLE
-//! (`shake::Composition`) on M^H, against independent references.
+//! (`geoshake::Composition`) on M^H, against independent references.
 //!
-//! Systems (declared with the macro, `shake::models`):
+//! Systems (declared with the macro, `geoshake::models`):
 //! - the planar pendulum (holonomic) over Störmer–Verlet;
 //! - the Hopf constraint with gravity (momentum-dependent, Section 5.4.2)
 //!   over the implicit midpoint rule, from the paper's z_a brought onto the
@@ -51,12 +51,12 @@
 use crate::common;
 
 use common::reference as oracle;
-use nalgebra::DVector;
-use shake::models::{HopfGravity, Pendulum};
-use shake::{
+use geoshake::models::{HopfGravity, Pendulum};
+use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop,
     StormerVerlet,
 };
+use nalgebra::DVector;
 
 /// The number of sample times: errors are measured at T/4, T/2, 3T/4 and T,
 /// and the largest is kept, so that an accidental cancellation at one time

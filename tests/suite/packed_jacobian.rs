@@ -6,18 +6,18 @@
 //!
 //! - the packed values are the dense entries, to the bit, for holonomic and
 //!   momentum-dependent constraints, at random points, for the macro's code
-//!   and for a run-time declaration (`shake::declared`, which provides
+//!   and for a run-time declaration (`geoshake::declared`, which provides
 //!   them too);
 //! - a run that reads G out of the dense g_z (`DenseJacobian`, a wrapper
 //!   without the packed values) is the same run, to the bit, on the slice
 //!   path (16 links) and against the fixed-size step (4 links).
 
-use shake::declared::DeclaredSystem;
-use shake::{
+use geoshake::declared::DeclaredSystem;
+use geoshake::{
     constrained_system, ConstrainedSystem, Integrator, Options, State, Stop, StormerVerlet,
 };
-use shake_testkit::bench::systems::{Chain16, Chain4};
-use shake_testkit::models::DenseJacobian;
+use geoshake_testkit::bench::systems::{Chain16, Chain4};
+use geoshake_testkit::models::DenseJacobian;
 
 constrained_system! {
     /// A constraint on positions and momenta together (g_z has entries in
@@ -101,8 +101,8 @@ fn the_packed_values_are_the_dense_entries() {
         packed_is_dense(&Chain4::new(1.0, 9.81)),
         packed_is_dense(&Chain16::new(1.0, 9.81)),
         packed_is_dense(&Mixed::new(0.3)),
-        packed_is_dense(&shake::models::Pendulum::new(1.0, 9.81)),
-        packed_is_dense(&shake::models::DoublePendulum::new(1.0, 0.7, 9.81)),
+        packed_is_dense(&geoshake::models::Pendulum::new(1.0, 9.81)),
+        packed_is_dense(&geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81)),
     ];
     // 4 entries per link but the first (2), 2 per rod for the pendulums.
     assert_eq!(counts[0], 100 * (4 * 4 - 2));
@@ -118,7 +118,7 @@ fn the_packed_values_are_the_dense_entries() {
     assert!(!declared_chain16().constraint_jacobian_values(&[0.0; 32], &[0.0; 32], &mut short));
     assert!(short.iter().all(|x| x.is_nan()), "left untouched");
     // A hand-written system provides none: the runtime reads g_z.
-    let hand = shake_testkit::models::SphericalPendulum::default();
+    let hand = geoshake_testkit::models::SphericalPendulum::default();
     let mut out = [f64::NAN; 3];
     assert!(!hand.constraint_jacobian_values(&[0.0, 0.0, -1.0], &[0.0; 3], &mut out));
     assert!(out.iter().all(|x| x.is_nan()), "left untouched");

@@ -1,5 +1,5 @@
 //! Claims 1–6 of MISSION.md ("What the paper claims") as tests, on the systems
-//! declared with `constrained_system!` (`shake::models`), checked against the
+//! declared with `constrained_system!` (`geoshake::models`), checked against the
 //! independent oracles of `shake-testkit/src/reference.rs` (plain Rust + num-dual,
 //! no shake code). The `paper` example measures the same claims and draws
 //! them; the runtime's own tests check them on hand-written systems.
@@ -11,12 +11,12 @@
 use crate::common;
 
 use common::reference as r;
-use nalgebra::DVector;
-use shake::models::{DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum};
-use shake::{
+use geoshake::models::{DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum};
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, Options, State, StepError, Stop,
     StormerVerlet, SymplecticEuler,
 };
+use nalgebra::DVector;
 
 const EPS: f64 = f64::EPSILON;
 
@@ -230,7 +230,7 @@ fn claim4_shake_ignores_the_start_on_the_fibre() {
     fn spread<S: ConstrainedSystem + Copy>(sys: S, z0: State, lambdas: &[f64]) -> f64 {
         let mut integ = Integrator::new(sys, ImplicitMidpoint, 0.1).shake();
         let s0 = integ.step(&z0).unwrap();
-        let mut flow = shake::FibreFlow::new(&sys);
+        let mut flow = geoshake::FibreFlow::new(&sys);
         lambdas
             .iter()
             .map(|&l| {

@@ -3,8 +3,8 @@
 //!
 //! They measure what the `paper` scenes `hopf_free` and `hopf_gravity`
 //! measure, with the same bounds and for the same reasons: both use
-//! `shake_testkit::hopf_lab`, which runs shake and compares with
-//! the independent reference (`shake_testkit::reference`). The runs here are
+//! `geoshake_testkit::hopf_lab`, which runs shake and compares with
+//! the independent reference (`geoshake_testkit::reference`). The runs here are
 //! shorter than the scene's full runs, so that the tests stay fast in a debug
 //! build; none of the bounds depends on the length of a run except where the
 //! bound says so (steps·ε).
@@ -12,12 +12,12 @@
 use crate::common;
 
 use common::reference;
-use shake_testkit::hopf_lab;
+use geoshake_testkit::hopf_lab;
 
+use geoshake::{ConstrainedSystem, Method, Options};
 use hopf_lab as lab;
 use nalgebra::DVector;
 use reference as r;
-use shake::{ConstrainedSystem, Method, Options};
 
 const EPS: f64 = f64::EPSILON;
 const H: f64 = 0.1;

@@ -4,7 +4,7 @@
 use crate::common;
 
 use common::alloc::allocations;
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     generate, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
 };
 
@@ -50,14 +50,14 @@ fn steps_do_not_allocate() {
     );
     // Clusters with a potential: the separate velocity stage.
     let (w, ws) = generate::water(20, 1).unwrap();
-    let mut field = shake::runtime::particles::Table::new(1, 3);
+    let mut field = geoshake::runtime::particles::Table::new(1, 3);
     for a in 0..w.particles() {
         field.push(&[a], &[0.0, 0.0, 1e-4]).unwrap();
     }
     let w = w
         .with_potential(
             "field",
-            shake::runtime::particles::stencils::LinearField::<3>,
+            geoshake::runtime::particles::stencils::LinearField::<3>,
             field,
         )
         .unwrap();

@@ -2,7 +2,7 @@
 //! the family, member, step and time that explain it, and a run that fails
 //! at step k returns the states up to k − 1.
 
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     generate, stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle,
     Stencil, Table, TopologyError,
 };

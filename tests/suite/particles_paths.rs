@@ -5,12 +5,12 @@
 use crate::common;
 
 use common::models::DoublePendulum;
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     generate,
     stencils::{Anchor, Distance, LinearField},
     Options, ParticleState, ParticleSystem, Rattle, SolverChoice, Table,
 };
-use shake::{Integrator, StormerVerlet};
+use geoshake::{Integrator, StormerVerlet};
 
 /// The double pendulum of the dense test models as particles: a pivot
 /// (`Anchor`), a link (`Distance`) and gravity (`LinearField`), in R².
@@ -342,7 +342,7 @@ fn translated_chain_keeps_its_constraints() {
 /// springs between the oxygens of neighbouring molecules.
 #[test]
 fn solvers_agree_on_water_with_forces() {
-    use shake::runtime::particles::stencils::{LinearField, Spring};
+    use geoshake::runtime::particles::stencils::{LinearField, Spring};
     let build = || {
         let (system, state) = generate::water(8, 4).unwrap();
         let mut field = Table::new(1, 3);

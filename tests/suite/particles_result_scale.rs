@@ -5,7 +5,7 @@
 //! below returned `Ok` off M, or off M^H, before the residual was measured
 //! at the result instead of at the input, without squares.
 
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle,
     SolverChoice, Table,
 };

@@ -1,7 +1,7 @@
 //! Defects found by the hostile review of the large-system path, each a
 //! failing case before its fix.
 
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     generate, Options, ParticleError, ParticleState, Rattle, SolverChoice,
 };
 
@@ -68,18 +68,18 @@ fn tiny_length_scales_are_not_silently_wrong() {
         let (sys, z) = generate::chain(20, 3).unwrap();
         let s = 1e-80;
         let table = sys.constraint_families()[0].table();
-        let mut scaled = shake::runtime::particles::Table::new(2, 1);
+        let mut scaled = geoshake::runtime::particles::Table::new(2, 1);
         for k in 0..table.len() {
             let ij = table.particles(k);
             scaled
                 .push(&[ij[0] as usize, ij[1] as usize], &[table.data(k)[0] * s])
                 .unwrap();
         }
-        let sys = shake::runtime::particles::ParticleSystem::new(3, sys.masses().to_vec())
+        let sys = geoshake::runtime::particles::ParticleSystem::new(3, sys.masses().to_vec())
             .unwrap()
             .with_constraints(
                 "link",
-                shake::runtime::particles::stencils::Distance::<3>,
+                geoshake::runtime::particles::stencils::Distance::<3>,
                 scaled.clone(),
             )
             .unwrap();

@@ -7,8 +7,8 @@
 use crate::common;
 
 use common::alloc::allocations;
-use shake::models::{Chain8, HopfGravity, Pendulum};
-use shake::{
+use geoshake::models::{Chain8, HopfGravity, Pendulum};
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet,
     SymplecticEuler,
 };

@@ -17,8 +17,8 @@
 //!
 //! Run with `--nocapture` to see the table of counts.
 
-use shake::models::{Chain8, Pendulum};
-use shake::{
+use geoshake::models::{Chain8, Pendulum};
+use geoshake::{
     BaseMap, ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, ImplicitMidpoint,
     Integrator, State, StormerVerlet,
 };

@@ -11,7 +11,7 @@
 
 use std::ops::ControlFlow;
 
-use shake::{
+use geoshake::{
     ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, Integrator, RunOutcome,
     SizeVisitor, State, StepError, StepEvent, Stop, StormerVerlet,
 };
@@ -109,24 +109,24 @@ fn pendulum_start() -> State {
 }
 
 fn double_start() -> State {
-    shake_testkit::starts::double_pendulum()
+    geoshake_testkit::starts::double_pendulum()
 }
 
 /// A chain of 8 links at varied angles, moving.
 fn chain_start() -> State {
-    shake_testkit::starts::chain(8)
+    geoshake_testkit::starts::chain(8)
 }
 
 #[test]
 fn regular_runs_take_the_same_steps_in_both_loops() {
-    let pendulum = shake::models::Pendulum::new(1.0, 9.81);
+    let pendulum = geoshake::models::Pendulum::new(1.0, 9.81);
     let failed = agree("pendulum", &pendulum, &pendulum_start(), 0.01, 40);
     assert!(failed.iter().all(|&(_, k)| k == 0), "{failed:?}");
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
     let failed = agree("double pendulum", &double, &double_start(), 0.01, 40);
     assert!(failed.iter().all(|&(_, k)| k == 0), "{failed:?}");
     // Eight constraints: SHAKE's Jacobian and N banded on the stack.
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     let failed = agree("chain of 8", &chain, &chain_start(), 0.01, 40);
     assert!(failed.iter().all(|&(_, k)| k == 0), "{failed:?}");
 }
@@ -136,9 +136,9 @@ fn failing_runs_end_alike_in_both_loops() {
     // Steps too long for the pendulum's Newton iteration at some states of
     // its swing but not at the first: the runs fail after a few steps,
     // between stored states for the strides 3 and 7.
-    let pendulum = shake::models::Pendulum::new(1.0, 9.81);
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
-    let chain = shake::models::Chain8::new(1.0, 1.0);
+    let pendulum = geoshake::models::Pendulum::new(1.0, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let chain = geoshake::models::Chain8::new(1.0, 1.0);
     let mut between = 0;
     for h in [0.2, 0.3, 0.45, 0.6] {
         for (name, failed) in [
@@ -272,8 +272,8 @@ impl<S: ConstrainedSystem> ConstrainedSystem for Counted<S> {
     }
 }
 
-type Pendulum = shake::models::Pendulum;
-type Double = shake::models::DoublePendulum;
+type Pendulum = geoshake::models::Pendulum;
+type Double = geoshake::models::DoublePendulum;
 
 #[test]
 fn a_run_takes_the_lane_unless_every_step_is_watched() {
@@ -341,7 +341,7 @@ fn an_overflowing_projection_ends_both_loops_alike() {
 /// would compare N with N at the run's last state).
 #[test]
 fn a_run_between_single_steps_changes_nothing_they_read() {
-    let double = shake::models::DoublePendulum::new(1.0, 0.7, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 0.7, 9.81);
     let fresh = || Integrator::new(double, StormerVerlet, 0.01);
     let mut z = double_start();
     let mut with_run = fresh();

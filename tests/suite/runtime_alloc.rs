@@ -7,7 +7,7 @@ use crate::common;
 
 use common::alloc::allocations;
 use common::models::*;
-use shake::{
+use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet,
     SymplecticEuler,
 };
@@ -62,14 +62,14 @@ fn steps_do_not_allocate() {
         DoublePendulum::default().state(0.5, 1.0, 0.3, -0.2),
     );
     // Declared with the macro: the fixed-size classical steps of one
-    // (`shake::classical::fixed`) and of two to eight constraints (`fixed_m`).
-    let declared = shake::models::Pendulum::new(1.0, 9.81);
+    // (`geoshake::classical::fixed`) and of two to eight constraints (`fixed_m`).
+    let declared = geoshake::models::Pendulum::new(1.0, 9.81);
     every_base(
         "declared pendulum",
         declared,
         Pendulum::default().state(1.0, 0.5),
     );
-    let double = shake::models::DoublePendulum::new(1.0, 1.0, 9.81);
+    let double = geoshake::models::DoublePendulum::new(1.0, 1.0, 9.81);
     every_base(
         "declared double pendulum",
         double,

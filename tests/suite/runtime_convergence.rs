@@ -16,11 +16,11 @@ use crate::common;
 
 use common::models::*;
 use common::reference as oracle;
-use nalgebra::DVector;
-use shake::{
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet,
     SymplecticEuler,
 };
+use nalgebra::DVector;
 
 const T: f64 = 1.0;
 const STEPS: [f64; 3] = [0.04, 0.02, 0.01];
@@ -107,7 +107,7 @@ fn pendulum_orders_against_the_angle_ode() {
         length: 1.5,
     };
     let (th, w) =
-        shake_testkit::reference::pendulum_reference(sys.gravity, sys.length, 1.2, 0.3, T);
+        geoshake_testkit::reference::pendulum_reference(sys.gravity, sys.length, 1.2, 0.3, T);
     let exact = sys.state(th, w).to_vector();
     // The GBS oracle agrees with the angle ODE (two independent references).
     let ref_sys = oracle::PlanarPendulum {

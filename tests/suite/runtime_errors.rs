@@ -5,7 +5,7 @@
 use crate::common;
 
 use common::models::*;
-use shake::{
+use geoshake::{
     ImplicitMidpoint, Integrator, Options, Stage, State, StepError, Stop, StormerVerlet,
     SymplecticEuler,
 };
@@ -39,7 +39,7 @@ fn newton_not_converged_mid_run_keeps_the_trajectory() {
     // The time of the step attempted, t0 + k·h, not its start.
     assert_eq!(t, step as f64 * 0.5);
     assert!(
-        matches!(source, shake::SolveError::NotConverged { iterations: 50, residual } if residual > 1e-3)
+        matches!(source, geoshake::SolveError::NotConverged { iterations: 50, residual } if residual > 1e-3)
     );
     // States 0, 1, …, step − 1 are all there, on M^H.
     assert_eq!(out.trajectory.steps(), (0..step).collect::<Vec<_>>());
@@ -59,7 +59,7 @@ fn newton_not_converged_mid_run_keeps_the_trajectory() {
 fn newton_budget_is_typed() {
     let sys = Pendulum::default();
     let opts = Options {
-        newton: shake::NewtonOptions {
+        newton: geoshake::NewtonOptions {
             max_iterations: 1,
             ..Default::default()
         },
@@ -230,7 +230,7 @@ fn non_finite_input_and_state() {
     assert!(integ.project_to_hidden(&bad).is_err());
 
     // Overflow mid-run: a free fall in an absurd field reaches ∞ at step 2.
-    let free = shake::Unconstrained(Pendulum {
+    let free = geoshake::Unconstrained(Pendulum {
         gravity: 1e308,
         length: 1.0,
     });

@@ -13,7 +13,7 @@
 use crate::common;
 
 use common::models::*;
-use shake::{
+use geoshake::{
     BaseMap, ConstrainedSystem, FibreFlow, ImplicitMidpoint, Integrator, Options, State, Stop,
     StormerVerlet, SymplecticEuler,
 };
@@ -415,7 +415,7 @@ fn unconstrained_systems_run_on_every_base_map() {
     // pendulum's H without its rod) is integrated exactly by all three maps
     // for q when the force is constant... only Störmer–Verlet and midpoint
     // are exact for this quadratic H; symplectic Euler is O(h).
-    let sys = shake::Unconstrained(Pendulum::default());
+    let sys = geoshake::Unconstrained(Pendulum::default());
     let z0 = State::from_slices(&[0.0, 0.0], &[1.0, 2.0]);
     let t = 1.0;
     let exact_q1 = 2.0 * t - 0.5 * t * t;
@@ -433,7 +433,7 @@ fn unconstrained_systems_run_on_every_base_map() {
     }
 }
 
-fn run_free<B: BaseMap>(sys: shake::Unconstrained<Pendulum>, base: B, z0: &State) -> f64 {
+fn run_free<B: BaseMap>(sys: geoshake::Unconstrained<Pendulum>, base: B, z0: &State) -> f64 {
     let mut integ = Integrator::new(sys, base, 0.01);
     let out = integ
         .run(z0.clone(), Stop::Time(1.0))

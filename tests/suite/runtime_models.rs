@@ -8,7 +8,7 @@
 use crate::common;
 
 use common::models::*;
-use shake::{ConstrainedSystem, FibreFlow};
+use geoshake::{ConstrainedSystem, FibreFlow};
 
 const DELTA: f64 = 1e-3;
 const TOL: f64 = 1e-7;

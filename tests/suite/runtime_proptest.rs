@@ -8,11 +8,11 @@
 use crate::common;
 
 use common::models::*;
-use proptest::prelude::*;
-use shake::{
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet,
     SymplecticEuler,
 };
+use proptest::prelude::*;
 
 fn residuals<S: ConstrainedSystem>(sys: &S, z: &State) -> (f64, f64) {
     let m = sys.constraint_count();

@@ -15,11 +15,11 @@
 use crate::common;
 
 use common::models::*;
-use nalgebra::{DMatrix, DVector};
-use shake::{
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, Method, Options, State,
     StormerVerlet, SymplecticEuler,
 };
+use nalgebra::{DMatrix, DVector};
 
 const DELTA: f64 = 1e-3;
 const TOL: f64 = 1e-9;

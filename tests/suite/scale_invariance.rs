@@ -20,7 +20,7 @@
 use crate::common;
 
 use common::models::*;
-use shake::{
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, Method, State, Stop, StormerVerlet,
 };
 
@@ -199,7 +199,7 @@ fn tiny_steps_are_not_refused() {
     tiny("double pendulum", c, c.state(0.5, -0.3, 0.2, 0.4));
 }
 
-shake::constrained_system! {
+geoshake::constrained_system! {
     /// A pendulum whose pivot is at (cx, 0).
     struct ShiftedPendulum {
         parameters { cx, length, gravity }
@@ -221,7 +221,7 @@ fn a_far_origin_neither_loosens_nor_breaks_the_constraint_tolerance() {
         let off = State::from_slices(&[cx + 1.0 + 1e-3, 0.0], &[0.0, 1.0]);
         let r = Integrator::new(sys, StormerVerlet, 0.01).step(&off);
         assert!(
-            matches!(r, Err(shake::StepError::NotOnConstraint { .. })),
+            matches!(r, Err(geoshake::StepError::NotOnConstraint { .. })),
             "cx = {cx:e}: {r:?}"
         );
         let on = State::from_slices(&[cx + 0.6, -0.8], &[0.8, 0.6]);

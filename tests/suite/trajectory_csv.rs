@@ -2,9 +2,9 @@
 //! (states, times, diagnostics, multipliers including the last state's NaN
 //! λ), and every malformed file a typed error, never a panic.
 
-use shake::examples::Pendulum;
-use shake::io::CsvError;
-use shake::{ImplicitMidpoint, Integrator, Stop, StormerVerlet, Trajectory};
+use geoshake::examples::Pendulum;
+use geoshake::io::CsvError;
+use geoshake::{ImplicitMidpoint, Integrator, Stop, StormerVerlet, Trajectory};
 
 fn to_csv(traj: &Trajectory) -> String {
     let mut out = Vec::new();
@@ -12,7 +12,7 @@ fn to_csv(traj: &Trajectory) -> String {
     String::from_utf8(out).unwrap()
 }
 
-use shake_testkit::same_bits::assert_same_bits;
+use geoshake_testkit::same_bits::assert_same_bits;
 
 #[test]
 fn a_rattle_run_with_diagnostics_round_trips_bit_for_bit() {
@@ -117,7 +117,7 @@ fn malformed_files_are_typed_errors() {
     }
 }
 
-shake::constrained_system! {
+geoshake::constrained_system! {
     /// A pendulum whose pivot moves as y = a·cos(t), time the coordinate
     /// `t`: its name is also the file's time column.
     pub struct Driven {
@@ -131,14 +131,14 @@ shake::constrained_system! {
 
 #[test]
 fn columns_carry_the_declared_names_and_read_back() {
-    use shake::Hamiltonian;
+    use geoshake::Hamiltonian;
     let sys = Driven { a: 0.1 };
     assert_eq!(
         (0..6).map(|k| sys.variable_name(k)).collect::<Vec<_>>(),
         ["t", "x", "y", "p_t", "p_x", "p_y"]
     );
     let mut integ = Integrator::new(sys, StormerVerlet, 0.05).with_diagnostics();
-    let z0 = shake::State::from_slices(&[0.0, 0.6, 0.1 - 0.8], &[0.0, 0.0, 0.0]);
+    let z0 = geoshake::State::from_slices(&[0.0, 0.6, 0.1 - 0.8], &[0.0, 0.0, 0.0]);
     let z0 = integ.project_to_hidden(&z0).unwrap();
     let traj = integ.run(z0, Stop::Steps(20)).execute().trajectory;
     let text = to_csv(&traj);

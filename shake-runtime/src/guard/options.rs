@@ -5,7 +5,7 @@ use crate::newton::NewtonOptions;
 /// Tolerances, limits and checks of an [`Integrator`](crate::Integrator).
 ///
 /// ```
-/// use shake_runtime::Options;
+/// use geoshake_runtime::Options;
 /// let opts = Options { max_condition: 1e6, ..Options::default() };
 /// assert_eq!(opts.jump_ratio, 1.0);
 /// ```

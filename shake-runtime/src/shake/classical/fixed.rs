@@ -209,7 +209,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
             if !r.is_finite() || !dq.iter().all(|x| x.is_finite()) {
                 return Err(not_finite(mon.iterations));
             }
-            // At round-off: the confirming update (`shake::classical::shake_step`).
+            // At round-off: the confirming update (`geoshake::classical::shake_step`).
             let at_floor = r == 0.0 || r.abs() <= floor;
             if at_floor && (r == 0.0 || mon.iterations == 0 || mon.exhausted()) {
                 break;
@@ -232,7 +232,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
             let (step_size, size) = (delta.abs(), lambda.abs());
             if mon.iterations == 0 {
                 lambda_first = lambda;
-                // λ's round-off level (`shake::classical::shake_step`).
+                // λ's round-off level (`geoshake::classical::shake_step`).
                 mon.set_floor(step_size / r_first * floor);
             }
             let verdict = mon.update_frozen(step_size, size, fresh);
@@ -348,7 +348,7 @@ pub(crate) fn show<S: ConstrainedSystem, const D: usize>(
 
 /// Π at (q, p) given N = {{H,g},g} there: one solve N σ = {g, H}, then
 /// the kick p ← p − σ G(q)ᵀ (the fibre flow). Returns the new p and σ.
-/// The operations of `shake::classical::project` (the slice path's lazy Π), in
+/// The operations of `geoshake::classical::project` (the slice path's lazy Π), in
 /// its order.
 #[inline(always)]
 pub(crate) fn project<S: ConstrainedSystem, const D: usize>(

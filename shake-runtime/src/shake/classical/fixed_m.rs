@@ -16,7 +16,7 @@
 //! O(m) with the recursion in registers). N on the stack (1.90 → 1.83) and
 //! the tridiagonal kernels (→ 1.50–1.53) took a 4-link chain's RATTLE run
 //! to about 1.5 times the hand-written step (BENCHMARKS.md, section 7.5).
-//! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
+//! `geoshake-macros`' tests show the macro emits this step for m = 2 to 8.
 
 use super::{packed_jacobian, Buffers};
 use crate::compensated::kahan_add;
@@ -166,7 +166,7 @@ struct Iterate<const D: usize, const M: usize> {
     r: [f64; M],
 }
 
-/// q1(λ) and r(λ) as `shake::classical::residual` computes them (λ = 0 when
+/// q1(λ) and r(λ) as `geoshake::classical::residual` computes them (λ = 0 when
 /// `lambda` is `None`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -206,7 +206,7 @@ fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
 }
 
 /// SHAKE's Jacobian −h G(q1) A G0ᵀ at `q1`, factorised in `jac`/`piv`, as
-/// `shake::classical::jacobian` forms it (the list of terms when A is diagonal,
+/// `geoshake::classical::jacobian` forms it (the list of terms when A is diagonal,
 /// else the column groups through `grad_p`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -269,7 +269,7 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
     .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
-/// `shake::classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
+/// `geoshake::classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
 /// the last λ, its first iterate and the last residual r are left in
 /// `ws.lambda`, `ws.lambda_first` and `ws.g` (on failure too, as the slice
 /// path leaves them), G0 and G at the last Jacobian's q1 packed in
@@ -307,7 +307,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         &mut cl.g0,
     );
     // g's round-off level near q0 and ‖∂g_i/∂z‖₁ at q0, in one pass over
-    // G0 (as the slice path, `shake::classical::shake_step`).
+    // G0 (as the slice path, `geoshake::classical::shake_step`).
     let mut floor = [0.0; M];
     ws.g_size.fill(0.0);
     for (&(i, k), &g) in cl.pattern.iter().zip(&cl.g0) {
@@ -331,7 +331,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         if !(r.is_finite() && all_finite(&it.r) && all_finite(&it.dq)) {
             break Err(not_finite(mon.iterations));
         }
-        // At round-off: the confirming update (`shake::classical::shake_step`).
+        // At round-off: the confirming update (`geoshake::classical::shake_step`).
         let at_floor = r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f);
         if at_floor && (r == 0.0 || need_jacobian || mon.exhausted()) {
             break Ok(());
@@ -368,7 +368,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         let (step, size) = (norm_inf(&delta), norm_inf(&lambda));
         if mon.iterations == 0 {
             lambda_first = lambda;
-            // λ's round-off level (`shake::classical::shake_step`).
+            // λ's round-off level (`geoshake::classical::shake_step`).
             mon.set_floor(step / r_first * norm_inf(&floor));
         }
         let verdict = mon.update_frozen(step, size, fresh);

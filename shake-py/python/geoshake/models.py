@@ -1,12 +1,12 @@
 """Compiled systems: the Rust models, with derivatives generated at compile
 time by ``constrained_system!`` (no interpretation), parameters by name.
 
-    >>> import shake
-    >>> shake.models.Pendulum(length=1.0, gravity=9.81).dof
+    >>> import geoshake
+    >>> geoshake.models.Pendulum(length=1.0, gravity=9.81).dof
     2
 """
 
-from ._shake import model as _model, model_names as _model_names
+from ._geoshake import model as _model, model_names as _model_names
 
 __all__ = []
 

@@ -1,4 +1,4 @@
-from ._shake import (
+from ._geoshake import (
     ComponentJumpError as ComponentJumpError,
     DeclarationError as DeclarationError,
     FibreJumpError as FibreJumpError,

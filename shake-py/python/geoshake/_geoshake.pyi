@@ -1,4 +1,4 @@
-"""Type stubs of the Rust extension ``shake._shake``."""
+"""Type stubs of the Rust extension ``geoshake._geoshake``."""
 
 from typing import Literal, Optional, Union
 

@@ -3,19 +3,19 @@
 Declare a system as a string in the grammar of the Rust macro
 ``constrained_system!`` (checked exactly as the macro checks it: coisotropy
 and nondegeneracy, the paper's Sections 3.2 and 5.2), or take a compiled one
-from :mod:`shake.models`, and integrate it::
+from :mod:`geoshake.models`, and integrate it::
 
     import numpy as np
-    import shake
+    import geoshake
 
-    pendulum = shake.declare('''
+    pendulum = geoshake.declare('''
         struct Pendulum {
             parameters { length, gravity }
             dof q[2], p[2];
             hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
             constraints { rod: q[0]^2 + q[1]^2 - length^2 }
         }''', length=1.0, gravity=9.81)
-    out = shake.rattle(pendulum, np.array([1.0, 0.0, 0.0, 0.0]), h=0.01, steps=1000)
+    out = geoshake.rattle(pendulum, np.array([1.0, 0.0, 0.0, 0.0]), h=0.01, steps=1000)
     out.trajectory   # (1001, 4): q then p
     out.lambda_      # (1001, 1): the multipliers
 
@@ -23,7 +23,7 @@ Every failure is a subclass of :class:`ShakeError`; a failed run's error
 carries ``step``, ``time``, ``residual`` and the partial trajectory.
 """
 
-from ._shake import (
+from ._geoshake import (
     ComponentJumpError,
     DeclarationError,
     FibreJumpError,
