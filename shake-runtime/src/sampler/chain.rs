@@ -1,0 +1,221 @@
+//! One chain: the transition kernel and its warm-up.
+//!
+//! The chain holds two integrators over Störmer–Verlet, one stepping with
+//! h and one with −h, so that each keeps the engine's cache of its last
+//! checked state (`step_in_place` resumes from it instead of checking and
+//! factorising N again).
+
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
+
+use crate::base_map::StormerVerlet;
+use crate::integrator::Integrator;
+use crate::state::State;
+use crate::system::ConstrainedSystem;
+use crate::tolerance::max_abs;
+
+use super::adapt::DualAveraging;
+use super::output::Rejection;
+use super::SamplerOptions;
+
+/// What one transition did.
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct Transition {
+    pub(crate) accepted: bool,
+    /// min(1, e^{−ΔH}), 0 when a check rejected the proposal.
+    pub(crate) alpha: f64,
+    /// H of the state kept.
+    pub(crate) energy: f64,
+    /// Forward steps taken.
+    pub(crate) steps: usize,
+    pub(crate) rejection: Option<Rejection>,
+}
+
+/// The draws of one chain, in the layout of `Samples` (draw-major).
+pub(crate) struct ChainOutput {
+    pub(crate) positions: Vec<f64>,
+    pub(crate) transitions: Vec<Transition>,
+    pub(crate) step_size: f64,
+}
+
+pub(crate) struct Chain<S: ConstrainedSystem> {
+    forward: Integrator<S, StormerVerlet>,
+    backward: Integrator<S, StormerVerlet>,
+    rng: ChaCha8Rng,
+    steps: usize,
+    reverse_tolerance: f64,
+    /// The chain's position (on M) with the momentum of the transition.
+    current: State,
+    /// The moving state of the trajectory.
+    z: State,
+    /// The state before the step being taken, for the reverse check.
+    before: State,
+    /// The step back from z.
+    back: State,
+}
+
+impl<S: ConstrainedSystem + Clone> Chain<S> {
+    /// A chain from q0 (checked on M by the caller), on stream `chain` of
+    /// the generator seeded with `seed`: the chain's draws depend on
+    /// (seed, chain) only, not on which thread runs it or when.
+    pub(crate) fn new(
+        system: &S,
+        q0: &[f64],
+        seed: u64,
+        chain: usize,
+        opts: &SamplerOptions,
+    ) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(chain as u64);
+        let d = system.dof();
+        let mut current = State::zeros(d);
+        current.q.as_mut_slice().copy_from_slice(q0);
+        Chain {
+            forward: Integrator::new(system.clone(), StormerVerlet, opts.step_size).rattle(),
+            backward: Integrator::new(system.clone(), StormerVerlet, -opts.step_size).rattle(),
+            rng,
+            steps: opts.steps,
+            reverse_tolerance: opts.reverse_tolerance,
+            current,
+            z: State::zeros(d),
+            before: State::zeros(d),
+            back: State::zeros(d),
+        }
+    }
+
+    /// Warm-up (with dual averaging when asked), then the draws.
+    pub(crate) fn run(mut self, opts: &SamplerOptions) -> ChainOutput {
+        let mut h = opts.step_size;
+        if let Some(target) = opts.target_acceptance {
+            let mut da = DualAveraging::new(h, target);
+            for _ in 0..opts.warmup {
+                let t = self.transition(da.step_size());
+                da.update(t.alpha);
+            }
+            if opts.warmup > 0 {
+                h = da.final_step_size();
+            }
+        } else {
+            for _ in 0..opts.warmup {
+                self.transition(h);
+            }
+        }
+        let d = self.current.q.len();
+        let mut positions = Vec::with_capacity(opts.draws * d);
+        let mut transitions = Vec::with_capacity(opts.draws);
+        for _ in 0..opts.draws {
+            transitions.push(self.transition(h));
+            positions.extend_from_slice(self.current.q.as_slice());
+        }
+        ChainOutput {
+            positions,
+            transitions,
+            step_size: h,
+        }
+    }
+
+    /// One transition of constrained HMC with step size h: a fresh momentum
+    /// p ~ N(0, I) projected onto T*_q M, L RATTLE steps each checked by
+    /// its step back, the Metropolis test on ΔH.
+    pub(crate) fn transition(&mut self, h: f64) -> Transition {
+        for p in self.current.p.iter_mut() {
+            *p = self.rng.sample(StandardNormal);
+        }
+        // Π along the fibre p ↦ p − g_qᵀσ onto {g_q p = 0}: for
+        // H = |p|²/2 + U the orthogonal projection onto the tangent space,
+        // which turns N(0, I) into the standard normal on T*_q M.
+        let reject = |kind: Rejection, energy: f64, steps: usize| Transition {
+            accepted: false,
+            alpha: 0.0,
+            energy,
+            steps,
+            rejection: Some(kind),
+        };
+        match self.forward.project(&self.current) {
+            Ok(z) => self.current = z,
+            Err(e) => return reject(Rejection::of(&e), f64::NAN, 0),
+        }
+        let sys = self.forward.system();
+        let h0 = sys.hamiltonian(self.current.q.as_slice(), self.current.p.as_slice());
+        if !h0.is_finite() {
+            return reject(Rejection::NonFinite, h0, 0);
+        }
+        self.z.clone_from(&self.current);
+        self.forward.with_step_size(h);
+        self.backward.with_step_size(-h);
+        for k in 0..self.steps {
+            if let Err(kind) = self.checked_step() {
+                return reject(kind, h0, k);
+            }
+        }
+        let sys = self.forward.system();
+        let h1 = sys.hamiltonian(self.z.q.as_slice(), self.z.p.as_slice());
+        if !h1.is_finite() {
+            return reject(Rejection::NonFinite, h0, self.steps);
+        }
+        let alpha = (h0 - h1).exp().min(1.0);
+        let u: f64 = self.rng.random();
+        if u < alpha {
+            self.current.clone_from(&self.z);
+            Transition {
+                accepted: true,
+                alpha,
+                energy: h1,
+                steps: self.steps,
+                rejection: None,
+            }
+        } else {
+            Transition {
+                accepted: false,
+                alpha,
+                energy: h0,
+                steps: self.steps,
+                rejection: Some(Rejection::Metropolis),
+            }
+        }
+    }
+
+    /// z ← R_h(z), accepted only if R_{−h} takes the result back to z.
+    ///
+    /// For H even in p, R_{−h} = ρ ∘ R_h ∘ ρ with ρ(q, p) = (q, −p): the
+    /// step back is the forward step from the end with negated momentum.
+    /// A proposal is an involution ρ ∘ R_h^L only where each solve found
+    /// the solution the step back finds again; elsewhere (a Newton
+    /// iteration that converged to another intersection of the fibre with
+    /// M) the step back lands elsewhere, and accepting would break detailed
+    /// balance (Zappa, Holmes-Cerfon and Goodman 2018; Lelièvre, Rousset
+    /// and Stoltz 2019). The test is symmetric: a trajectory passes it
+    /// exactly when its reversal does, so rejecting is itself reversible.
+    fn checked_step(&mut self) -> Result<(), Rejection> {
+        self.before.clone_from(&self.z);
+        self.forward
+            .step_in_place(&mut self.z)
+            .map_err(|e| Rejection::of(&e))?;
+        if !self.reverse_tolerance.is_finite() {
+            return Ok(());
+        }
+        self.back.clone_from(&self.z);
+        self.backward
+            .step_in_place(&mut self.back)
+            .map_err(|e| Rejection::of(&e))?;
+        let miss = self
+            .back
+            .q
+            .iter()
+            .chain(self.back.p.iter())
+            .zip(self.before.q.iter().chain(self.before.p.iter()))
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        // Relative to the states' size, as the engine's own reverse check
+        // of composed steps: a step back on the same branch returns to
+        // round-off times the conditioning of its solves (1e-14 here), a
+        // branch jump misses by the distance between two crossings.
+        let scale = max_abs(self.before.q.as_slice(), self.before.p.as_slice())
+            .max(max_abs(self.z.q.as_slice(), self.z.p.as_slice()));
+        if miss <= self.reverse_tolerance * scale {
+            Ok(())
+        } else {
+            Err(Rejection::Reverse)
+        }
+    }
+}
