@@ -44,6 +44,7 @@ pub(crate) struct Chain<S: ConstrainedSystem> {
     backward: Integrator<S, StormerVerlet>,
     rng: ChaCha8Rng,
     steps: usize,
+    jitter: f64,
     reverse_tolerance: f64,
     /// The chain's position (on M) with the momentum of the transition.
     current: State,
@@ -76,6 +77,7 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             backward: Integrator::new(system.clone(), StormerVerlet, -opts.step_size).rattle(),
             rng,
             steps: opts.steps,
+            jitter: opts.step_size_jitter,
             reverse_tolerance: opts.reverse_tolerance,
             current,
             z: State::zeros(d),
@@ -115,10 +117,17 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         }
     }
 
-    /// One transition of constrained HMC with step size h: a fresh momentum
+    /// One transition of constrained HMC with step size h (jittered when
+    /// asked): a fresh momentum
     /// p ~ N(0, I) projected onto T*_q M, L RATTLE steps each checked by
     /// its step back, the Metropolis test on ΔH.
     pub(crate) fn transition(&mut self, h: f64) -> Transition {
+        let h = if self.jitter > 0.0 {
+            let u: f64 = self.rng.random();
+            h * (1.0 + self.jitter * (2.0 * u - 1.0))
+        } else {
+            h
+        };
         for p in self.current.p.iter_mut() {
             *p = self.rng.sample(StandardNormal);
         }

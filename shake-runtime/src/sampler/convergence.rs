@@ -146,7 +146,8 @@ fn rank_normalise(chains: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let mut start = 0;
     while start < total {
         let mut end = start + 1;
-        while end < total && order[end].0.total_cmp(&order[start].0).is_eq() {
+        // `==`, not `total_cmp`: −0.0 and 0.0 are one value, a tie.
+        while end < total && order[end].0 == order[start].0 {
             end += 1;
         }
         // Ranks start..end − 1 counted from 1: their mean.
@@ -435,5 +436,45 @@ mod tests {
         let flat = vec![vec![1.0; 100]; 2];
         assert!(ess_mean(&flat).is_nan() && rhat(&flat).is_nan());
         assert!(ess_bulk(&[[1.0, 2.0, 3.0]]).is_nan());
+    }
+
+    /// The three estimators against ArviZ (arviz-stats 0.8:
+    /// `ess(method="bulk")`, `ess(method="mean")`, `rhat(method="rank")`)
+    /// on three chains of 101 draws (odd: the split drops the middle one),
+    /// and on the same rounded to halves (ties, and −0.0 beside 0.0).
+    #[test]
+    fn agrees_with_arviz() {
+        let chains: Vec<Vec<f64>> = (0..3)
+            .map(|c| {
+                (0..101)
+                    .map(|t| {
+                        let (t, c) = (t as f64, c as f64);
+                        (0.9 * t + c).sin()
+                            + 0.3 * (0.05 * t * (c + 1.0)).sin()
+                            + 0.1 * ((7.0 * t + 3.0 * c) % 11.0)
+                    })
+                    .collect()
+            })
+            .collect();
+        let rounded: Vec<Vec<f64>> = chains
+            .iter()
+            .map(|c| c.iter().map(|x| (2.0 * x).round() / 2.0).collect())
+            .collect();
+        let cases = [
+            (
+                &chains,
+                [161.27770874496144, 156.6984704660489, 0.9997289400314645],
+            ),
+            (
+                &rounded,
+                [162.43960487960524, 159.07448916289724, 1.0017144572377483],
+            ),
+        ];
+        for (x, want) in cases {
+            let got = [ess_bulk(x), ess_mean(x), rhat(x)];
+            for (g, w) in got.iter().zip(want) {
+                assert!((g - w).abs() <= 1e-10 * w, "{got:?} vs ArviZ {want:?}");
+            }
+        }
     }
 }

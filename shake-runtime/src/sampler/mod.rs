@@ -125,6 +125,13 @@ pub struct SamplerOptions {
     /// h: the step size, the starting value of the adaptation when there
     /// is one (default 0.1).
     pub step_size: f64,
+    /// Each transition draws its step size uniformly from
+    /// h·[1 − j, 1 + j] with j this (default 0, in [0, 1)): a trajectory
+    /// length L·h that matches a period of the dynamics (an oscillation
+    /// about a mode) takes the chain back near its start, and a random
+    /// length breaks that resonance. A mixture of kernels that each keep
+    /// the target keeps it too.
+    pub step_size_jitter: f64,
     /// The mean acceptance probability that warm-up adapts h to (default
     /// `Some(0.8)`); `None` keeps h.
     pub target_acceptance: Option<f64>,
@@ -146,6 +153,7 @@ impl Default for SamplerOptions {
             warmup: 1000,
             steps: 10,
             step_size: 0.1,
+            step_size_jitter: 0.0,
             target_acceptance: Some(0.8),
             reverse_tolerance: 1e-8,
             seed: 0,
@@ -175,6 +183,9 @@ impl SamplerOptions {
         }
         if !(self.step_size > 0.0 && self.step_size.is_finite()) {
             return invalid("step_size", self.step_size, "positive and finite");
+        }
+        if !(0.0..1.0).contains(&self.step_size_jitter) {
+            return invalid("step_size_jitter", self.step_size_jitter, "in [0, 1)");
         }
         if let Some(t) = self.target_acceptance {
             if !(t > 0.0 && t < 1.0) {
