@@ -247,11 +247,11 @@ fn von_mises_fisher_on_the_sphere() {
     let s = vmf_samples();
     let (m1, m2) = vmf_moments(3.0);
     let checks = [
-        Check::new("E[z] = coth k - 1/k", &s, |q| q[2], m1),
-        Check::new("E[z^2]", &s, |q| q[2] * q[2], m2),
-        Check::new("E[x]", &s, |q| q[0], 0.0),
+        Check::new("E[z] = coth k - 1/k", s, |q| q[2], m1),
+        Check::new("E[z^2]", s, |q| q[2] * q[2], m2),
+        Check::new("E[x]", s, |q| q[0], 0.0),
     ];
-    assert_checks("von Mises-Fisher κ = 3", &s, &checks);
+    assert_checks("von Mises-Fisher κ = 3", s, &checks);
 }
 
 /// The check has power: the same estimate against the mean resultant
@@ -259,7 +259,7 @@ fn von_mises_fisher_on_the_sphere() {
 #[test]
 fn a_wrong_answer_fails_the_check() {
     let s = vmf_samples();
-    let wrong = Check::new("E[z] for k = 3.3", &s, |q| q[2], vmf_moments(3.3).0);
+    let wrong = Check::new("E[z] for k = 3.3", s, |q| q[2], vmf_moments(3.3).0);
     println!("{}", wrong.line());
     assert!(!wrong.passes(), "{}", wrong.line());
 }

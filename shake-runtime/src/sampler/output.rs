@@ -203,7 +203,7 @@ impl Samples {
     }
 
     /// The series f(q) of every chain, `[chain][draw]`: the input of
-    /// [`Estimate::of`] for an expectation E[f].
+    /// [`Estimate::of`] for an expectation E(f).
     ///
     /// ```
     /// # use shake_runtime::sampler::{sample, SamplerOptions};
@@ -280,7 +280,7 @@ pub struct Estimate {
 }
 
 impl Estimate {
-    /// Estimates E[x] from chains `[chain][draw]` of x.
+    /// Estimates the expectation of x from chains `[chain][draw]` of x.
     pub fn of<C: AsRef<[f64]>>(chains: &[C]) -> Estimate {
         let all = || chains.iter().flat_map(|c| c.as_ref().iter().copied());
         let n = all().count() as f64;
