@@ -220,6 +220,15 @@ impl Samples {
     }
 
     /// The rejections of chain `c` by kind.
+    ///
+    /// ```
+    /// # use shake_runtime::sampler::{sample, SamplerOptions};
+    /// # use shake_runtime::examples::Pendulum;
+    /// let opts = SamplerOptions { chains: 1, draws: 50, warmup: 0, ..Default::default() };
+    /// let s = sample(&Pendulum { gravity: 0.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
+    /// let accepted = s.accepted.iter().filter(|a| **a).count();
+    /// assert_eq!(s.rejections(0).total() + accepted, 50);
+    /// ```
     pub fn rejections(&self, c: usize) -> RejectionCounts {
         let mut counts = RejectionCounts::default();
         for r in self.rejection[c * self.draws..(c + 1) * self.draws]
@@ -233,6 +242,18 @@ impl Samples {
 
     /// Per coordinate: mean, standard deviation, R̂ and ESS; per chain:
     /// acceptance, step size, rejections.
+    ///
+    /// ```
+    /// # use shake_runtime::sampler::{sample, SamplerOptions};
+    /// # use shake_runtime::examples::Pendulum;
+    /// let opts = SamplerOptions { chains: 2, draws: 400, warmup: 200, ..Default::default() };
+    /// let s = sample(&Pendulum { gravity: 1.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
+    /// let summary = s.summary();
+    /// assert_eq!((summary.coordinates.len(), summary.chains.len()), (2, 2));
+    /// assert!(summary.acceptance() > 0.5 && summary.min_ess_bulk() > 50.0);
+    /// assert_eq!(summary.rejected().total(), s.rejections(0).total() + s.rejections(1).total());
+    /// println!("{summary}"); // a table, then any warnings
+    /// ```
     pub fn summary(&self) -> Summary {
         let coordinates = (0..self.dim)
             .map(|k| Estimate::of(&self.series(|q| q[k])))
