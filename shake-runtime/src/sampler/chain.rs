@@ -1,9 +1,12 @@
 //! One chain: the transition kernel and its warm-up.
 //!
 //! The chain holds two integrators over Störmer–Verlet, one stepping with
-//! h and one with −h, so that each keeps the engine's cache of its last
-//! checked state (`step_in_place` resumes from it instead of checking and
-//! factorising N again).
+//! h and one with −h, so that the forward one keeps the engine's cache of
+//! its last checked state: from the second step of a trajectory on,
+//! `step_in_place` resumes from it instead of checking the start and
+//! factorising N there again. The step back starts from the forward
+//! step's result, never from its own last one, and so always checks its
+//! start afresh: one such check per step, whichever integrator pays it.
 
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
