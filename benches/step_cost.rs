@@ -18,13 +18,13 @@
 //!
 //! Nothing here asserts: benchmarks print.
 
-use shake_testkit::bench::{chain, dual, report, systems};
-use shake_testkit::models;
+use geoshake_testkit::bench::{chain, dual, report, systems};
+use geoshake_testkit::models;
 
 use chain::{chain_state, HandChain};
 use criterion::{measurement::WallTime, BenchmarkGroup, Criterion};
 use dual::Ad;
-use shake::{BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet};
+use geoshake::{BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, StormerVerlet};
 use std::hint::black_box;
 use std::time::Duration;
 use systems::*;
@@ -73,7 +73,7 @@ fn pendulums(c: &mut Criterion) {
     steps(
         &mut g,
         "generated",
-        shake::models::Pendulum::new(1.0, 1.0),
+        geoshake::models::Pendulum::new(1.0, 1.0),
         StormerVerlet,
         0.01,
         &z0,
@@ -97,7 +97,7 @@ fn pendulums(c: &mut Criterion) {
     steps(
         &mut g,
         "generated",
-        shake::models::Pendulum::new(1.0, 1.0),
+        geoshake::models::Pendulum::new(1.0, 1.0),
         ImplicitMidpoint,
         0.01,
         &z0,
@@ -119,8 +119,8 @@ fn pendulums(c: &mut Criterion) {
         0.01,
         &z0,
     );
-    let gen = shake::models::SphericalPendulum::new(1.0, 1.0);
-    steps(&mut g, "generated", gen, StormerVerlet, 0.01, &z0);
+    let generated = geoshake::models::SphericalPendulum::new(1.0, 1.0);
+    steps(&mut g, "generated", generated, StormerVerlet, 0.01, &z0);
     let ad = Ad::new(SphericalG {
         length: 1.0,
         gravity: 1.0,
@@ -144,8 +144,8 @@ fn hopf(c: &mut Criterion) {
         0.1,
         &z0,
     );
-    let gen = shake::models::HopfGravity::new(0.0, -1.0, 1.0);
-    steps(&mut g, "generated", gen, ImplicitMidpoint, 0.1, &z0);
+    let generated = geoshake::models::HopfGravity::new(0.0, -1.0, 1.0);
+    steps(&mut g, "generated", generated, ImplicitMidpoint, 0.1, &z0);
     let ad = Ad::new(HopfG {
         gravity: [0.0, -1.0],
         radius2: 1.0,

@@ -22,20 +22,20 @@
 //!    fourth-order method on M^H is RATTLE *composed* (Section 4,
 //!    [`Composition`]), shown in the last column over φ_h.
 //!
-//! `tests/custom_base_map.rs` includes this file and checks these orders
+//! `tests/suite/custom_base_map.rs` includes this file and checks these orders
 //! and the symplecticity of RATTLE over φ_h on M^H. The reference solutions
-//! come from the workspace's test kit (`shake_testkit::reference`); the
+//! come from the workspace's test kit (`geoshake_testkit::reference`); the
 //! base map needs nothing but `shake`.
 //!
 //! Run with `cargo run --release --example custom_base_map`.
 
-use shake::models::Pendulum;
-use shake::runtime::examples::HarmonicOscillator;
-use shake::{
+use geoshake::models::Pendulum;
+use geoshake::runtime::examples::HarmonicOscillator;
+use geoshake::{
     BaseMap, Composition, Hamiltonian, Integrator, NewtonOptions, SolveError, State, Stop,
     StormerVerlet, Unconstrained,
 };
-use shake_testkit::reference::{pendulum_reference, pendulum_state};
+use geoshake_testkit::reference::{pendulum_reference, pendulum_state};
 
 /// Yoshida's triple jump of a symmetric base map ψ = `B`:
 /// φ_h = ψ_{γ₁h} ∘ ψ_{γ₂h} ∘ ψ_{γ₁h}, with γ₁ = 1/(2 − 2^{1/3}) and

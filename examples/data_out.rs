@@ -12,8 +12,8 @@
 //! paper's point) and both constraints stay at round-off. Everything goes to
 //! `data-out/`.
 
-use shake::examples::Pendulum;
-use shake::prelude::*;
+use geoshake::examples::Pendulum;
+use geoshake::prelude::*;
 use std::error::Error;
 use std::fs::File;
 use std::io::BufWriter;
@@ -78,12 +78,14 @@ fn main() -> Result<(), Box<dyn Error>> {
     write("pendulum.arrow", &|p| {
         Ok(traj.write_arrow(BufWriter::new(File::create(p)?))?)
     })?;
-    write("phase.png", &|p| Ok(shake::plot::phase_portrait(&traj, p)?))?;
+    write("phase.png", &|p| {
+        Ok(geoshake::plot::phase_portrait(&traj, p)?)
+    })?;
     write("energy.png", &|p| {
-        Ok(shake::plot::energy_error(&traj, &pendulum, p)?)
+        Ok(geoshake::plot::energy_error(&traj, &pendulum, p)?)
     })?;
     write("residual.png", &|p| {
-        Ok(shake::plot::constraint_residual(&traj, &pendulum, p)?)
+        Ok(geoshake::plot::constraint_residual(&traj, &pendulum, p)?)
     })?;
 
     // Both files read back to the same trajectory, bit for bit.

@@ -16,23 +16,23 @@
 //!   `--stride K` (S: the first and last state are kept);
 //! - `--threads T`: rayon threads per rank (default: rayon's choice);
 //! - `--batch B` (1024), `--store DIR` (record and resume; see
-//!   `shake_runtime::ensemble_store`), `--max-batches M` (stop after M
+//!   `geoshake_runtime::ensemble_store`), `--max-batches M` (stop after M
 //!   batches, as a job at its wall-time limit would);
 //! - `--fail k1,k2,…`: make these members fail, alternately with a NaN
 //!   initial state (an error at step 0) and spinning at ω = 100 (a SHAKE
 //!   Newton failure a few steps in, with a partial trajectory);
 //! - `--check`: rank 0 also runs the ensemble in this process with
-//!   `shake_runtime::run_ensemble` and checks every gathered outcome against
+//!   `geoshake_runtime::run_ensemble` and checks every gathered outcome against
 //!   it bit for bit, and the injected failures; exit status 1 if not.
 //!
 //! The last line printed (by rank 0) is
 //! `ensemble members=… ok=… failed=… ranks=… threads=… members_per_s=…`.
 
-use shake::ensemble::pack_outcome;
-use shake::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
-use shake::examples::Pendulum;
-use shake::mpi::{self, traits::Communicator, Threading};
-use shake::{run_ensemble, Integrator, State, Stop, StormerVerlet};
+use geoshake::ensemble::pack_outcome;
+use geoshake::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
+use geoshake::examples::Pendulum;
+use geoshake::mpi::{self, traits::Communicator, Threading};
+use geoshake::{run_ensemble, Integrator, State, Stop, StormerVerlet};
 use std::process::ExitCode;
 
 struct Args {
@@ -117,7 +117,7 @@ fn main() -> ExitCode {
     // The global pool: `run_ensemble_mpi` (and MPI) stay on this thread,
     // only the members run on the pool's.
     if let Some(t) = a.threads {
-        shake::rayon::ThreadPoolBuilder::new()
+        geoshake::rayon::ThreadPoolBuilder::new()
             .num_threads(t)
             .build_global()
             .expect("the global rayon pool is built once");
@@ -182,7 +182,7 @@ fn check(
     starts: &[State],
     stop: Stop,
     stride: u64,
-    gathered: &[Option<shake::RunOutcome>],
+    gathered: &[Option<geoshake::RunOutcome>],
 ) -> Result<usize, String> {
     let here = run_ensemble(rattle, starts, stop, stride);
     let mut n = 0;

@@ -19,7 +19,7 @@
 //! the pendulum started 0.3 rad from upright swings about the top; with the
 //! pivot still (a = 0) the same start falls over. The program prints both,
 //! and how well RATTLE keeps g, {g,H̃} and H̃.
-use shake::prelude::*;
+use geoshake::prelude::*;
 
 constrained_system! {
     /// A planar pendulum (unit mass, rod `length`) whose pivot moves as

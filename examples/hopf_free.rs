@@ -9,8 +9,8 @@
 //! that circle to round-off; only the timing differs: it turns a little
 //! faster, ω_h = ω(1 + O(h²)).
 
-use shake::models::HopfFree;
-use shake::{ImplicitMidpoint, Integrator, State, Stop};
+use geoshake::models::HopfFree;
+use geoshake::{ImplicitMidpoint, Integrator, State, Stop};
 
 fn main() {
     let h = 0.1;

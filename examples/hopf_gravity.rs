@@ -10,8 +10,8 @@
 //! M^H through the same fibre, whose trajectory runs into a fold (case (iii)),
 //! and shows the typed error the run stops with.
 
-use shake::models::HopfGravity;
-use shake::{ImplicitMidpoint, Integrator, Method, State, Stop};
+use geoshake::models::HopfGravity;
+use geoshake::{ImplicitMidpoint, Integrator, Method, State, Stop};
 
 fn main() {
     let z_a = [
@@ -35,7 +35,7 @@ fn main() {
             .into_result()
             .expect("z_a's trajectory stays away from the folds");
         let d = &traj.diagnostics;
-        let max = |f: fn(&shake::DiagnosticRecord) -> f64| d.iter().map(f).fold(0.0, f64::max);
+        let max = |f: fn(&geoshake::DiagnosticRecord) -> f64| d.iter().map(f).fold(0.0, f64::max);
         let (e_min, e_max) = d.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
             (a.min(r.energy), b.max(r.energy))
         });

@@ -26,10 +26,10 @@
 //! trajectory holds (as requested from the allocator) and the growth of the
 //! resident set, per stored state. Nothing asserts.
 
-use shake_testkit::bench::limit;
+use geoshake_testkit::bench::limit;
 
+use geoshake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};
 use limit::{limit_chain_state, LimitChain, LimitPendulum};
-use shake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -177,7 +177,7 @@ fn pendulum(steps: u64) -> Row {
     let z0 = State::from_slices(&q0, &p0);
     let lim = LimitPendulum { length, gravity };
     let (run_us, step_us, max_rel_g, de, last, iterations) = library(
-        shake::models::Pendulum::new(length, gravity),
+        geoshake::models::Pendulum::new(length, gravity),
         &z0,
         steps,
         |z| lim.relative_g(&[z.q[0], z.q[1]]),
@@ -284,7 +284,7 @@ fn rss() -> usize {
 
 fn memory() {
     let n: u64 = 1_000_000;
-    let sys = shake::models::Pendulum::new(1.0, 1.0);
+    let sys = geoshake::models::Pendulum::new(1.0, 1.0);
     let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
     let z0 = State::from_slices(
         &[1f64.sin(), -1f64.cos()],
@@ -310,7 +310,7 @@ fn memory() {
 fn main() {
     // `OVERHEAD_ONLY=chain_16` measures one system (for profiling).
     let only = std::env::var("OVERHEAD_ONLY").ok();
-    let want = |name: &str| only.as_deref().map_or(true, |o| o == name);
+    let want = |name: &str| only.as_deref().is_none_or(|o| o == name);
     if want("pendulum") {
         print("pendulum", &pendulum(20_000));
     }

@@ -9,12 +9,12 @@
 //! gravity (implicit midpoint, the general path), one line per run:
 //! `reverse_check run=… on_us=… off_us=… ratio=…`.
 
-use shake::BaseMap;
-use shake::{
+use geoshake::BaseMap;
+use geoshake::{
     Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, Options, State, Stop,
     StormerVerlet,
 };
-use shake_testkit::models::{Hopf, Pendulum};
+use geoshake_testkit::models::{Hopf, Pendulum};
 
 /// Best of 5 runs of `n` steps from `z0`, µs per step.
 fn per_step<S: ConstrainedSystem + Clone, B: BaseMap>(

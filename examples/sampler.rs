@@ -1,4 +1,4 @@
-//! Constrained HMC (`shake::sampler`) on five targets with known answers,
+//! Constrained HMC (`geoshake::sampler`) on five targets with known answers,
 //! one line each:
 //!
 //! ```text
@@ -10,15 +10,15 @@
 //! divided by the wall time of the whole run (warm-up included, chains in
 //! parallel); `rhat` the largest rank-normalised split-R̂ over them;
 //! `check=pass` when every expectation is within 4.5 Monte Carlo standard
-//! errors of its exact value (as tests/sampler.rs checks them).
+//! errors of its exact value (as tests/suite/sampler.rs checks them).
 //!
 //! `cargo run --release --example sampler`
 
 use std::time::Instant;
 
-use shake::constrained_system;
-use shake::sampler::{sample, Estimate, SamplerOptions, Samples};
-use shake::ConstrainedSystem;
+use geoshake::constrained_system;
+use geoshake::sampler::{sample, Estimate, SamplerOptions, Samples};
+use geoshake::ConstrainedSystem;
 
 constrained_system! {
     /// Uniform on the unit sphere S².

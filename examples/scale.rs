@@ -27,7 +27,7 @@
 
 use std::time::Instant;
 
-use shake::runtime::particles::{
+use geoshake::runtime::particles::{
     generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
     Table,
 };
@@ -40,7 +40,7 @@ fn thread_cpu_seconds() -> f64 {
         sec: i64,
         nsec: i64,
     }
-    extern "C" {
+    unsafe extern "C" {
         fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
     }
     const CLOCK_THREAD_CPUTIME_ID: i32 = 3;

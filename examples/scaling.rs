@@ -13,10 +13,10 @@
 //! Times are the best of several repetitions (the machine may be shared);
 //! the tables are printed as markdown. Nothing asserts.
 
-use shake_testkit::bench::{chain, systems};
+use geoshake_testkit::bench::{chain, systems};
 
 use chain::{chain_state, HandChain};
-use shake::{
+use geoshake::{
     run_ensemble, BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, Options, State, Stop,
     StormerVerlet,
 };
@@ -100,8 +100,8 @@ fn main() {
                 },
                 $steps,
             );
-            let gen = $gen.map(|g| chain_row($n, g, $steps));
-            let growth = match (prev, gen) {
+            let generated = $gen.map(|g| chain_row($n, g, $steps));
+            let growth = match (prev, generated) {
                 (Some((pn, pt)), Some(g)) => format!("{:.2} (N × {})", g.0 / pt, $n / pn),
                 _ => "—".into(),
             };
@@ -110,12 +110,12 @@ fn main() {
                 "| {} | {} | {} | {} | {} | {} |",
                 $n,
                 us(hand.0),
-                cell(gen.map(|g| g.0)),
+                cell(generated.map(|g| g.0)),
                 us(hand.1),
-                cell(gen.map(|g| g.1)),
+                cell(generated.map(|g| g.1)),
                 growth
             );
-            if let Some(g) = gen {
+            if let Some(g) = generated {
                 prev = Some(($n, g.0));
             }
         }};
@@ -134,7 +134,7 @@ fn main() {
     println!("| scene | output every step | output every 100 steps | ratio | eager projection (every step), output every 100 |");
     println!("|---|---:|---:|---:|---:|");
     {
-        let sys = shake::models::Pendulum::new(1.0, 1.0);
+        let sys = geoshake::models::Pendulum::new(1.0, 1.0);
         let z0 = State::from_slices(
             &[1f64.sin(), -1f64.cos()],
             &[0.5 * 1f64.cos(), 0.5 * 1f64.sin()],
@@ -164,7 +164,7 @@ fn main() {
     println!("| scene | Störmer–Verlet | midpoint | midpoint / SV |");
     println!("|---|---:|---:|---:|");
     {
-        let sys = shake::models::Pendulum::new(1.0, 1.0);
+        let sys = geoshake::models::Pendulum::new(1.0, 1.0);
         let z0 = State::from_slices(
             &[1f64.sin(), -1f64.cos()],
             &[0.5 * 1f64.cos(), 0.5 * 1f64.sin()],
@@ -214,7 +214,7 @@ fn main() {
     println!("| threads | wall time | runs / s | speed-up |");
     println!("|---:|---:|---:|---:|");
     {
-        let sys = shake::models::Pendulum::new(1.0, 1.0);
+        let sys = geoshake::models::Pendulum::new(1.0, 1.0);
         let template = Integrator::new(sys, StormerVerlet, 0.01).rattle();
         let starts: Vec<State> = (0..64)
             .map(|k| {
@@ -224,7 +224,7 @@ fn main() {
             .collect();
         let mut single = 0.0;
         for threads in [1, cores] {
-            let pool = shake::rayon::ThreadPoolBuilder::new()
+            let pool = geoshake::rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap();

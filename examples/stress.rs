@@ -28,10 +28,12 @@
 //!    (Brouwer's law) and like n if they drift. Plotted against a √n line,
 //!    with and without compensated summation, with the fitted exponents.
 
+use geoshake::models::{HopfGravity, Pendulum};
+use geoshake::{
+    BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
-use shake::models::{HopfGravity, Pendulum};
-use shake::{BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet};
 use std::error::Error;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -265,7 +267,7 @@ fn energy_run<S: ConstrainedSystem + Clone, B: BaseMap>(
     // The library's bar on the per-step hook (`--features progress`);
     // without the feature the run is silent until it ends.
     #[cfg(feature = "progress")]
-    let mut progress = shake::progress::Progress::new(name);
+    let mut progress = geoshake::progress::Progress::new(name);
     let mut pts = Vec::with_capacity((steps / every) as usize + 1);
     // The energy is looked at every `every/100` steps; each plotted point is
     // the largest |ΔH| over a window of `every` steps (the envelope: single

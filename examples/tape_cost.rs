@@ -1,13 +1,13 @@
 //! What a run-time declaration costs per call: the tape interpreter of
-//! `shake_symbolic::tape` against the straight-line code the macro compiles,
+//! `geoshake_symbolic::tape` against the straight-line code the macro compiles,
 //! on the same systems (the pendulum and a chain of 16 links), function by
 //! function, and whether they compute the same numbers.
 //!
 //! `cargo run --release --example tape_cost`
 
-use shake::constrained_system;
-use shake::runtime::ConstrainedSystem;
-use shake_symbolic::tape::{Program, Tape};
+use geoshake::constrained_system;
+use geoshake::runtime::ConstrainedSystem;
+use geoshake_symbolic::tape::{Program, Tape};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -73,7 +73,7 @@ fn ns(mut f: impl FnMut()) -> f64 {
 }
 
 fn compare<S: ConstrainedSystem>(label: &str, src: &str, sys: &S, params: &[f64]) {
-    let declared = shake_symbolic::declare(src).expect("declaration");
+    let declared = geoshake_symbolic::declare(src).expect("declaration");
     let (s, d) = declared.analysis.values();
     let prog = Program::compile(s, d, params);
     let (dof, m) = (prog.dof(), prog.constraint_count());
@@ -183,13 +183,13 @@ fn compare<S: ConstrainedSystem>(label: &str, src: &str, sys: &S, params: &[f64]
 
 /// µs per RATTLE step (Störmer–Verlet, h = 0.01) from `z0`, the best of
 /// three runs of `steps` steps.
-fn step_cost<S: ConstrainedSystem + Clone>(sys: S, z0: &shake::State, steps: u64) -> f64 {
-    let mut integ = shake::Integrator::new(sys, shake::StormerVerlet, 0.01).rattle();
+fn step_cost<S: ConstrainedSystem + Clone>(sys: S, z0: &geoshake::State, steps: u64) -> f64 {
+    let mut integ = geoshake::Integrator::new(sys, geoshake::StormerVerlet, 0.01).rattle();
     (0..3)
         .map(|_| {
             let t = Instant::now();
             let out = integ
-                .run(z0.clone(), shake::Stop::Steps(steps))
+                .run(z0.clone(), geoshake::Stop::Steps(steps))
                 .stride(steps)
                 .execute();
             assert!(out.error.is_none(), "{:?}", out.error);
@@ -199,17 +199,17 @@ fn step_cost<S: ConstrainedSystem + Clone>(sys: S, z0: &shake::State, steps: u64
 }
 
 fn steps_table() {
-    use shake::declared::DeclaredSystem;
+    use geoshake::declared::DeclaredSystem;
     let params = [("length", 1.0), ("gravity", 9.81)];
     println!();
     println!("| system | compiled (µs/step) | declared (µs/step) | ratio |");
     println!("|---|---:|---:|---:|");
-    let z0 = shake::State::from_slices(&[1.0, 0.0], &[0.0, 0.0]);
-    let a = step_cost(shake::models::Pendulum::new(1.0, 9.81), &z0, 20_000);
+    let z0 = geoshake::State::from_slices(&[1.0, 0.0], &[0.0, 0.0]);
+    let a = step_cost(geoshake::models::Pendulum::new(1.0, 9.81), &z0, 20_000);
     let b = step_cost(DeclaredSystem::new(PENDULUM, &params).unwrap(), &z0, 20_000);
     println!("| pendulum | {a:.3} | {b:.3} | {:.1} |", b / a);
     let q: Vec<f64> = (0..16).flat_map(|k| [k as f64 + 1.0, 0.0]).collect();
-    let z0 = shake::State::from_slices(&q, &[0.0; 32]);
+    let z0 = geoshake::State::from_slices(&q, &[0.0; 32]);
     let a = step_cost(Chain16::new(1.0, 9.81), &z0, 2_000);
     let b = step_cost(
         DeclaredSystem::new(chain!(16), &params).unwrap(),
@@ -225,7 +225,7 @@ fn main() {
     compare(
         "pendulum",
         PENDULUM,
-        &shake::models::Pendulum::new(1.0, 9.81),
+        &geoshake::models::Pendulum::new(1.0, 9.81),
         &[1.0, 9.81],
     );
     compare(

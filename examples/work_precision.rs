@@ -16,14 +16,14 @@
 //! is the best of several repetitions of `Run::execute` that observes only
 //! the final state (a RATTLE run then projects once).
 
-use shake_testkit::{plot, reference};
+use geoshake_testkit::{plot, reference};
 
-use nalgebra::DVector;
-use plot::{Figure, Mark};
-use shake::{
+use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop,
     StormerVerlet, SymplecticEuler,
 };
+use nalgebra::DVector;
+use plot::{Figure, Mark};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -178,7 +178,7 @@ fn main() {
         let (reference, err) = reference::reference_solution_auto(&r, &z, t_end, 1e-13);
         eprintln!("pendulum reference: error estimate {err:.1e}");
         let z0 = State::from_vector(&z);
-        let sys = shake::models::Pendulum::new(1.0, 1.0);
+        let sys = geoshake::models::Pendulum::new(1.0, 1.0);
         let steps: Vec<u64> = steps.iter().map(|n| n * 4).collect();
         let mut curves = Curves::new();
         methods(
@@ -236,7 +236,7 @@ fn main() {
         let (reference, err) = reference::reference_solution_auto(&r, &z, t_end, 1e-13);
         eprintln!("Hopf reference: error estimate {err:.1e}");
         let z0 = State::from_vector(&z);
-        let sys = shake::models::HopfGravity::new(0.0, -1.0, 1.0);
+        let sys = geoshake::models::HopfGravity::new(0.0, -1.0, 1.0);
         let mut curves = Curves::new();
         methods(
             &mut curves,

@@ -1,19 +1,19 @@
 //! Systems declared at run time, from a string in the grammar of
 //! [`constrained_system!`](crate::constrained_system).
 //!
-//! The string goes through the macro's own front end (`shake-symbolic`):
+//! The string goes through the macro's own front end (`geoshake-symbolic`):
 //! the same parsing, differentiation, simplification and checks (coisotropy,
 //! Section 3.2; nondegeneracy, Section 5.2), so a declaration the macro
 //! refuses at compile time is refused here with the same message, located
 //! by line and column in the string. What the macro would emit as Rust is
-//! compiled into a tape (`shake_symbolic::tape`) that computes the same
+//! compiled into a tape (`geoshake_symbolic::tape`) that computes the same
 //! `f64`s as the macro's code, operation for operation; [`DeclaredSystem`]
 //! implements [`Hamiltonian`] and [`ConstrainedSystem`] on it, so an
 //! [`Integrator`](crate::Integrator) runs it unchanged.
 //!
 //! ```
-//! use shake::declared::DeclaredSystem;
-//! use shake::{ImplicitMidpoint, Integrator, State};
+//! use geoshake::declared::DeclaredSystem;
+//! use geoshake::{ImplicitMidpoint, Integrator, State};
 //!
 //! let pendulum = DeclaredSystem::new(
 //!     "struct Pendulum {
@@ -32,9 +32,9 @@
 //! ```
 
 use crate::runtime::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
-use shake_symbolic::diff::Kind;
-use shake_symbolic::tape::Program;
-pub use shake_symbolic::DeclError;
+use geoshake_symbolic::diff::Kind;
+use geoshake_symbolic::tape::Program;
+pub use geoshake_symbolic::DeclError;
 
 /// Why a run-time declaration was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -82,13 +82,13 @@ impl DeclaredSystem {
     /// every declared parameter, by name.
     ///
     /// ```
-    /// use shake::declared::{DeclaredSystem, DeclareError};
+    /// use geoshake::declared::{DeclaredSystem, DeclareError};
     /// let src = "struct Free { dof q[1], p[1]; hamiltonian = p[0]^2 / 2 + q[0] * z; }";
     /// let Err(DeclareError::Declaration(e)) = DeclaredSystem::new(src, &[]) else { panic!() };
     /// assert_eq!((e.line, e.column), (1, 65));
     /// ```
     pub fn new(src: &str, parameters: &[(&str, f64)]) -> Result<Self, DeclareError> {
-        let declared = shake_symbolic::declare(src)?;
+        let declared = geoshake_symbolic::declare(src)?;
         let names = declared.parameters();
         let mut values: Vec<Option<f64>> = vec![None; names.len()];
         for &(name, value) in parameters {

@@ -1,7 +1,7 @@
 //! This facade re-exports the two crates: [`constrained_system!`] (from
-//! `shake-macros`) declares a system and generates its derivatives at compile
-//! time; [`runtime`] (`shake-runtime`) integrates it. [`prelude`] gathers
-//! what a first program needs (`use shake::prelude::*;`). The README below is
+//! `geoshake-macros`) declares a system and generates its derivatives at compile
+//! time; [`runtime`] (`geoshake-runtime`) integrates it. [`prelude`] gathers
+//! what a first program needs (`use geoshake::prelude::*;`). The README below is
 //! the crate's front page, and its example is compiled and run as a doctest.
 //!
 //! # Non-autonomous systems: time as a coordinate
@@ -14,10 +14,10 @@
 //! so the paper's results (symplecticity on Mᴴ, order 2, no drift in H̃) hold
 //! as they are. Details in `docs/non_autonomous.md`; a worked example in
 //! `examples/forced_pendulum.rs`; a convergence test against an independent
-//! solution in `tests/forced_pendulum.rs`.
+//! solution in `tests/suite/forced_pendulum.rs`.
 //!
 //! ```
-//! use shake::prelude::*;
+//! use geoshake::prelude::*;
 //!
 //! constrained_system! {
 //!     /// A pendulum whose pivot moves as y = amplitude·cos(omega·t).
@@ -44,9 +44,9 @@
 //!
 #![doc = include_str!("../README.md")]
 
-// Generated code names `::shake::...`; this lets the facade declare systems
+// Generated code names `::geoshake::...`; this lets the facade declare systems
 // (the `models` below) with the macro too.
-extern crate self as shake;
+extern crate self as geoshake;
 
 pub mod declared;
 pub mod models;
@@ -54,9 +54,9 @@ pub mod models;
 pub mod plot;
 pub mod prelude;
 
-pub use shake_macros::constrained_system;
-pub use shake_runtime as runtime;
-pub use shake_runtime::*;
+pub use geoshake_macros::constrained_system;
+pub use geoshake_runtime as runtime;
+pub use geoshake_runtime::*;
 
 /// Re-exported so that generated code and users name one `nalgebra`.
 pub use nalgebra;

@@ -5,8 +5,8 @@
 //! each doc states H and g as the macro understood them.
 //!
 //! ```
-//! use shake::models::Pendulum;
-//! use shake::{ImplicitMidpoint, Integrator, State};
+//! use geoshake::models::Pendulum;
+//! use geoshake::{ImplicitMidpoint, Integrator, State};
 //!
 //! let mut rattle = Integrator::new(Pendulum::new(1.0, 1.0), ImplicitMidpoint, 0.05).rattle();
 //! let z0 = rattle.project_to_hidden(&State::from_slices(&[1.0, 0.0], &[0.0, 0.0])).unwrap();

@@ -20,16 +20,16 @@
 //! system font is needed.
 //!
 //! ```
-//! use shake::prelude::*;
-//! use shake::examples::Pendulum;
+//! use geoshake::prelude::*;
+//! use geoshake::examples::Pendulum;
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let pendulum = Pendulum { gravity: 9.81, length: 1.0 };
 //! let mut rattle = Integrator::new(pendulum, StormerVerlet, 0.01).rattle();
 //! let traj = rattle.run(pendulum.state(1.0, 0.0), Stop::Time(20.0)).execute().trajectory;
 //! let dir = std::env::temp_dir();
-//! shake::plot::phase_portrait(&traj, dir.join("phase.png"))?;
-//! shake::plot::energy_error(&traj, &pendulum, dir.join("energy.svg"))?;
-//! shake::plot::constraint_residual(&traj, &pendulum, dir.join("residual.png"))?;
+//! geoshake::plot::phase_portrait(&traj, dir.join("phase.png"))?;
+//! geoshake::plot::energy_error(&traj, &pendulum, dir.join("energy.svg"))?;
+//! geoshake::plot::constraint_residual(&traj, &pendulum, dir.join("residual.png"))?;
 //! # Ok(())
 //! # }
 //! ```
@@ -50,8 +50,8 @@ pub const LOG_FLOOR: f64 = 1e-18;
 /// Why a figure was not written.
 ///
 /// ```
-/// use shake::plot::{phase_portrait, PlotError};
-/// let empty = shake::Trajectory::default();
+/// use geoshake::plot::{phase_portrait, PlotError};
+/// let empty = geoshake::Trajectory::default();
 /// assert!(matches!(phase_portrait(&empty, "never.png"), Err(PlotError::Empty)));
 /// ```
 #[derive(Debug, thiserror::Error)]
@@ -144,12 +144,12 @@ struct Chart {
 /// The start is marked with a dot.
 ///
 /// ```
-/// use shake::prelude::*;
-/// use shake::examples::Pendulum;
+/// use geoshake::prelude::*;
+/// use geoshake::examples::Pendulum;
 /// let p = Pendulum::default();
 /// let traj = Integrator::new(p, StormerVerlet, 0.05).run(p.state(0.5, 0.0), Stop::Steps(200)).execute().trajectory;
 /// let path = std::env::temp_dir().join("shake_doc_phase.svg");
-/// shake::plot::phase_portrait(&traj, &path).unwrap();
+/// geoshake::plot::phase_portrait(&traj, &path).unwrap();
 /// assert!(std::fs::read_to_string(&path).unwrap().contains("q[1]"));
 /// ```
 pub fn phase_portrait(traj: &Trajectory, path: impl AsRef<Path>) -> Result<(), PlotError> {
@@ -193,11 +193,11 @@ pub fn phase_portrait(traj: &Trajectory, path: impl AsRef<Path>) -> Result<(), P
 /// which), on a linear axis (a drift shows as a trend).
 ///
 /// ```
-/// use shake::prelude::*;
-/// use shake::examples::Pendulum;
+/// use geoshake::prelude::*;
+/// use geoshake::examples::Pendulum;
 /// let p = Pendulum::default();
 /// let traj = Integrator::new(p, StormerVerlet, 0.05).rattle().run(p.state(0.5, 0.0), Stop::Steps(200)).execute().trajectory;
-/// shake::plot::energy_error(&traj, &p, std::env::temp_dir().join("shake_doc_energy.png")).unwrap();
+/// geoshake::plot::energy_error(&traj, &p, std::env::temp_dir().join("shake_doc_energy.png")).unwrap();
 /// ```
 pub fn energy_error<S: Hamiltonian>(
     traj: &Trajectory,
@@ -244,11 +244,11 @@ pub fn energy_error<S: Hamiltonian>(
 /// on a logarithmic axis.
 ///
 /// ```
-/// use shake::prelude::*;
-/// use shake::examples::Pendulum;
+/// use geoshake::prelude::*;
+/// use geoshake::examples::Pendulum;
 /// let p = Pendulum::default();
 /// let traj = Integrator::new(p, StormerVerlet, 0.05).shake().run(p.state(0.5, 0.0), Stop::Steps(200)).execute().trajectory;
-/// shake::plot::constraint_residual(&traj, &p, std::env::temp_dir().join("shake_doc_residual.svg")).unwrap();
+/// geoshake::plot::constraint_residual(&traj, &p, std::env::temp_dir().join("shake_doc_residual.svg")).unwrap();
 /// ```
 pub fn constraint_residual<S: ConstrainedSystem>(
     traj: &Trajectory,

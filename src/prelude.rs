@@ -1,4 +1,4 @@
-//! What a first program needs, in one import: `use shake::prelude::*;`.
+//! What a first program needs, in one import: `use geoshake::prelude::*;`.
 //!
 //! The macro that declares a system ([`constrained_system!`]), the
 //! integrator and its run controls ([`Integrator`], [`Method`], [`Options`],
@@ -15,7 +15,7 @@
 //! systems, ready-made).
 //!
 //! ```
-//! use shake::prelude::*;
+//! use geoshake::prelude::*;
 //!
 //! constrained_system! {
 //!     /// A planar pendulum: unit mass on a rod of length `length`.
@@ -45,8 +45,8 @@
 //! # }
 //! ```
 
-pub use shake_macros::constrained_system;
-pub use shake_runtime::{
+pub use geoshake_macros::constrained_system;
+pub use geoshake_runtime::{
     BaseMap, ClosedForm, Composition, ConstrainedSystem, DiagnosticRecord, Hamiltonian,
     ImplicitMidpoint, Integrator, Method, Options, RunOutcome, SolveError, State, StepError, Stop,
     StormerVerlet, SymplecticEuler, Trajectory,

@@ -41,16 +41,17 @@
 // A NaN must fail every bound: the negated comparisons are the point.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-mod common;
+// The test kit under the name the tests use (`common::models`, …).
+use geoshake_testkit as common;
 
 use common::models::*;
-use proptest::prelude::*;
-use proptest::strategy::ValueTree;
-use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
-use shake::{
+use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, NewtonOptions, Options,
     State, StepError, Stop, StormerVerlet, SymplecticEuler,
 };
+use proptest::prelude::*;
+use proptest::strategy::ValueTree;
+use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -75,7 +76,7 @@ enum Sys {
     /// Holonomic, m = 2, d = 4 (gravity).
     Double(f64),
     /// The same declared with `constrained_system!` (gravity): its
-    /// classical steps run on stack arrays (`shake::classical::fixed_m`).
+    /// classical steps run on stack arrays (`geoshake::classical::fixed_m`).
     DeclaredDouble(f64),
     /// Non-separable H, holonomic (ε, gravity).
     NonSeparable(f64, f64),
@@ -361,8 +362,8 @@ fn initial(sys: &Sys, start: &Start) -> State {
         // The fields are public: a mismatched state can be built without a
         // (panicking) constructor, and the library must refuse it.
         Start::WrongLength(a, b) => State {
-            q: shake::nalgebra::DVector::from_element(*a, 0.5),
-            p: shake::nalgebra::DVector::from_element(*b, 0.5),
+            q: geoshake::nalgebra::DVector::from_element(*a, 0.5),
+            p: geoshake::nalgebra::DVector::from_element(*b, 0.5),
         },
         Start::Exceptional(b, orthogonal, eps) => {
             // |q|² − |p|² = 2ε·r²-ish, with the angle between q and p at
@@ -662,7 +663,7 @@ fn run_case(case: &Case) -> Verdict {
         Sys::DeclaredDouble(gravity) => {
             // Unit masses and rods, as `DoublePendulum::default()`.
             judge_sys(
-                shake::models::DoublePendulum::new(1.0, 1.0, gravity),
+                geoshake::models::DoublePendulum::new(1.0, 1.0, gravity),
                 case,
                 z0,
             )

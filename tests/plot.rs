@@ -3,9 +3,9 @@
 //! writes nothing. The figures of the first test are left in
 //! `$TMPDIR/shake_plot_test/` to be looked at.
 
-use shake::examples::{HarmonicOscillator, Pendulum};
-use shake::plot::{self, PlotError, SIZE};
-use shake::{Integrator, Stop, StormerVerlet, Trajectory};
+use geoshake::examples::{HarmonicOscillator, Pendulum};
+use geoshake::plot::{self, PlotError, SIZE};
+use geoshake::{Integrator, Stop, StormerVerlet, Trajectory};
 use std::path::{Path, PathBuf};
 
 fn out_dir() -> PathBuf {

@@ -3,9 +3,9 @@
 //! (Hidden bars: a test must not draw; what is checked is the state the
 //! bar would show.)
 
-use shake::examples::Pendulum;
-use shake::prelude::*;
-use shake::progress::Progress;
+use geoshake::examples::Pendulum;
+use geoshake::prelude::*;
+use geoshake::progress::Progress;
 
 #[test]
 fn the_bar_follows_each_run_to_its_end() {

@@ -4,9 +4,9 @@
 //! NaN λ), the CSV's column names, and every damaged file a typed error,
 //! never a panic.
 
-use shake::examples::Pendulum;
-use shake::io_arrow::ArrowIoError;
-use shake::{ImplicitMidpoint, Integrator, Stop, StormerVerlet, Trajectory};
+use geoshake::examples::Pendulum;
+use geoshake::io_arrow::ArrowIoError;
+use geoshake::{ImplicitMidpoint, Integrator, Stop, StormerVerlet, Trajectory};
 use std::io::Cursor;
 
 fn to_arrow(traj: &Trajectory) -> Vec<u8> {
@@ -19,7 +19,7 @@ fn read(bytes: &[u8]) -> Result<Trajectory, ArrowIoError> {
     Trajectory::read_arrow(Cursor::new(bytes))
 }
 
-use shake_testkit::same_bits::assert_same_bits;
+use geoshake_testkit::same_bits::assert_same_bits;
 
 fn rattle_run() -> Trajectory {
     let p = Pendulum {
@@ -155,10 +155,10 @@ fn damaged_files_are_typed_errors() {
 
 #[test]
 fn columns_carry_the_declared_names_and_read_back() {
-    use shake::models::IndexOne;
+    use geoshake::models::IndexOne;
     let sys = IndexOne { coupling: 0.5 };
     let mut integ = Integrator::new(sys, StormerVerlet, 0.05).with_diagnostics();
-    let z0 = shake::State::from_slices(&[0.5, 0.0], &[0.1, 0.0]);
+    let z0 = geoshake::State::from_slices(&[0.5, 0.0], &[0.1, 0.0]);
     let z0 = integ.project_to_hidden(&z0).unwrap();
     let traj = integ.run(z0, Stop::Steps(10)).execute().trajectory;
     let mut file = Vec::new();

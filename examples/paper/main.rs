@@ -12,7 +12,7 @@
 //! machine, command line), so a table found later can be traced to its run.
 
 mod claims;
-use shake_testkit::{models, plot, reference};
+use geoshake_testkit::{models, plot, reference};
 mod run_info;
 mod scenes;
 

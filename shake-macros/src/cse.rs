@@ -249,7 +249,7 @@ mod expansion_cost {
     use std::time::Instant;
 
     /// Expansion time and size of the generated code of chains of N links
-    /// (BENCHMARKS.md): `cargo test -p shake-macros --release -- --ignored
+    /// (BENCHMARKS.md): `cargo test -p geoshake-macros --release -- --ignored
     /// --nocapture expansion_of_chains`.
     #[test]
     #[ignore = "a measurement, not a check"]

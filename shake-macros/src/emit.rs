@@ -1,5 +1,5 @@
 //! The generated items: the struct, its constructor, and the impls of
-//! `shake::runtime::{Hamiltonian, ConstrainedSystem}`.
+//! `geoshake::runtime::{Hamiltonian, ConstrainedSystem}`.
 //!
 //! Layout follows the runtime's contract (`shake-runtime/src/system.rs`):
 //! flat column-major outputs, q-columns before p-columns, and only
@@ -272,8 +272,8 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     let fibre = match der.kind {
         Kind::None => quote! {
             #[inline]
-            fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::shake::runtime::ClosedForm {
-                ::shake::runtime::ClosedForm::Applied
+            fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::geoshake::runtime::ClosedForm {
+                ::geoshake::runtime::ClosedForm::Applied
             }
         },
         // exp(Σλ_i X_{g_i}) for g = g(q): q fixed, p ← p − g_q(q)ᵀλ (Section 5.1).
@@ -299,10 +299,10 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
             });
             quote! {
                 #[inline]
-                fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::shake::runtime::ClosedForm {
+                fn fibre_flow(&self, lambda: &[f64], q: &mut [f64], p: &mut [f64]) -> ::geoshake::runtime::ClosedForm {
                     #q_in #l_in #lets #p_arr
                     #(#kicks)*
-                    ::shake::runtime::ClosedForm::Applied
+                    ::geoshake::runtime::ClosedForm::Applied
                 }
             }
         }
@@ -318,7 +318,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
     let fixed = if classical && (1..=8).contains(&m) {
         quote! {
             #[inline]
-            fn with_sizes<V: ::shake::runtime::SizeVisitor<Self>>(&self, v: V) -> V::Output {
+            fn with_sizes<V: ::geoshake::runtime::SizeVisitor<Self>>(&self, v: V) -> V::Output {
                 v.fixed::<#d, #m>(self)
             }
         }
@@ -341,7 +341,7 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
 
         #[automatically_derived]
         #[allow(unused_variables, unused_mut, clippy::all, clippy::pedantic, clippy::nursery)]
-        impl ::shake::runtime::Hamiltonian for #name {
+        impl ::geoshake::runtime::Hamiltonian for #name {
             #[inline]
             fn dof(&self) -> usize { #d }
             #[inline]
@@ -368,11 +368,11 @@ pub fn impls(def: &SystemDef, sys: &System, der: &Derived) -> TokenStream {
 
         #[automatically_derived]
         #[allow(unused_variables, unused_mut, clippy::all, clippy::pedantic, clippy::nursery)]
-        impl ::shake::runtime::ConstrainedSystem for #name {
+        impl ::geoshake::runtime::ConstrainedSystem for #name {
             #[inline]
             fn constraint_count(&self) -> usize { #m }
             #[inline]
-            fn kind(&self) -> ::shake::runtime::ConstraintKind { ::shake::runtime::ConstraintKind::#kind }
+            fn kind(&self) -> ::geoshake::runtime::ConstraintKind { ::geoshake::runtime::ConstraintKind::#kind }
             #[inline]
             fn quadratic_constraints(&self) -> bool { #quadratic_constraints }
             fn jacobian_pattern(&self) -> &[(usize, usize)] {
@@ -423,7 +423,7 @@ pub fn fallback(def: &SystemDef) -> TokenStream {
             pub const JACOBIAN_PATTERN: &'static [(usize, usize)] = &[];
         }
         #[allow(unused_variables)]
-        impl ::shake::runtime::Hamiltonian for #name {
+        impl ::geoshake::runtime::Hamiltonian for #name {
             fn dof(&self) -> usize { unreachable!() }
             fn separable(&self) -> bool { unreachable!() }
             fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 { unreachable!() }
@@ -432,9 +432,9 @@ pub fn fallback(def: &SystemDef) -> TokenStream {
             fn hessian(&self, q: &[f64], p: &[f64], h_zz: &mut [f64]) { unreachable!() }
         }
         #[allow(unused_variables)]
-        impl ::shake::runtime::ConstrainedSystem for #name {
+        impl ::geoshake::runtime::ConstrainedSystem for #name {
             fn constraint_count(&self) -> usize { unreachable!() }
-            fn kind(&self) -> ::shake::runtime::ConstraintKind { unreachable!() }
+            fn kind(&self) -> ::geoshake::runtime::ConstraintKind { unreachable!() }
             fn jacobian_pattern(&self) -> &[(usize, usize)] { unreachable!() }
             fn constraint_name(&self, i: usize) -> &str { unreachable!() }
             fn constraints(&self, q: &[f64], p: &[f64], g: &mut [f64]) { unreachable!() }

@@ -1,6 +1,6 @@
 //! The `constrained_system!` macro of `shake`.
 //!
-//! A thin shell over `shake-symbolic`, which holds the front end: `parse`
+//! A thin shell over `geoshake-symbolic`, which holds the front end: `parse`
 //! the declaration into a typed view that keeps the user's spans, `lower` it
 //! into the hash-consed expression graph of `symbolic` (kept canonical by
 //! `simplify`), differentiate it (`diff`), `check` the paper's assumptions.
@@ -14,8 +14,8 @@ mod topology;
 
 // The front end's modules under their old paths (`crate::diff::Derived`).
 #[cfg(test)]
-use shake_symbolic::check;
-use shake_symbolic::{diff, lower, parse, parse_topology, simplify, symbolic};
+use geoshake_symbolic::check;
+use geoshake_symbolic::{diff, lower, parse, parse_topology, simplify, symbolic};
 
 #[cfg(test)]
 mod fuzz_tests;
@@ -27,12 +27,12 @@ use proc_macro2::TokenStream as TokenStream2;
 use quote::quote;
 
 /// Declares a constrained Hamiltonian system: a struct whose `f64` fields are
-/// the parameters, with generated impls of `shake::runtime::Hamiltonian` and
-/// `shake::runtime::ConstrainedSystem` (H, g and every derivative SHAKE and
+/// the parameters, with generated impls of `geoshake::runtime::Hamiltonian` and
+/// `geoshake::runtime::ConstrainedSystem` (H, g and every derivative SHAKE and
 /// RATTLE need, differentiated symbolically at compile time).
 ///
 /// ```
-/// use shake::prelude::*;
+/// use geoshake::prelude::*;
 ///
 /// constrained_system! {
 ///     /// Planar pendulum (the paper's Example 1.3).
@@ -72,7 +72,7 @@ use quote::quote;
 /// default that is not a number literal:
 ///
 /// ```
-/// use shake::prelude::*;
+/// use geoshake::prelude::*;
 ///
 /// constrained_system! {
 ///     pub struct Pendulum {
@@ -91,7 +91,7 @@ use quote::quote;
 /// ```
 ///
 /// ```compile_fail
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Pendulum {
 ///         parameters { length = 1.0, gravity }
 ///         dof q[2], p[2];
@@ -105,7 +105,7 @@ use quote::quote;
 /// A chain of `N` links, anchored at the origin:
 ///
 /// ```
-/// use shake::prelude::*;
+/// use geoshake::prelude::*;
 ///
 /// constrained_system! {
 ///     pub struct Chain {
@@ -168,10 +168,10 @@ use quote::quote;
 /// `n` particles in R^D (n and the masses given at run time) with
 /// H = Σ_a |p_a|²/(2 m_a) + V(x), V the sum of the `potential` families, and
 /// the holonomic constraint families of `constraints`; the runtime's
-/// `shake::runtime::particles` solves it.
+/// `geoshake::runtime::particles` solves it.
 ///
 /// ```
-/// use shake::constrained_system;
+/// use geoshake::constrained_system;
 ///
 /// constrained_system! {
 ///     /// Rigid water: three distance constraints per molecule.
@@ -239,7 +239,7 @@ use quote::quote;
 /// Generated for `Water` (names from the declaration): the struct with one
 /// `pub f64` per parameter and `new(..)`; `Water::DIM`; per family a struct
 /// `WaterBond` (system name + family name in CamelCase, the parameters as
-/// fields) implementing `shake::runtime::particles::Stencil` (`ARITY`, `DIM`,
+/// fields) implementing `geoshake::runtime::particles::Stencil` (`ARITY`, `DIM`,
 /// `DATA`, `value` and `gradient` as straight-line code, differentiated once,
 /// simplified and CSE'd), `water.bond_stencil()`, and `Water::bonds_table()`
 /// (an empty `Table::new(ARITY, DATA)`); and
@@ -327,7 +327,7 @@ use quote::quote;
 /// A misspelt name, "did you mean `theta`?":
 ///
 /// ```compile_fail
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Cone {
 ///         parameters { length, gravity }
 ///         coordinates theta, phi;
@@ -342,7 +342,7 @@ use quote::quote;
 /// `**` for a power, "the power operator is `^`":
 ///
 /// ```compile_fail
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Oscillator {
 ///         dof q[1], p[1];
 ///         hamiltonian = (p[0]**2 + q[0]**2) / 2;
@@ -355,7 +355,7 @@ use quote::quote;
 /// coisotropic, Section 3.2):
 ///
 /// ```compile_fail
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Bad {
 ///         dof q[2], p[2];
 ///         hamiltonian = (p[0]^2 + p[1]^2) / 2;
@@ -369,7 +369,7 @@ use quote::quote;
 /// example that failed for another reason would prove nothing):
 ///
 /// ```
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Cone {
 ///         parameters { length, gravity }
 ///         coordinates theta, phi;
@@ -378,13 +378,13 @@ use quote::quote;
 ///         constraints { cone: phi - length * theta }
 ///     }
 /// }
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Oscillator {
 ///         dof q[1], p[1];
 ///         hamiltonian = (p[0]^2 + q[0]^2) / 2;
 ///     }
 /// }
-/// shake::constrained_system! {
+/// geoshake::constrained_system! {
 ///     pub struct Good {
 ///         dof q[2], p[2];
 ///         hamiltonian = (p[0]^2 + p[1]^2) / 2;
@@ -412,7 +412,7 @@ fn expand(input: TokenStream2) -> TokenStream2 {
         let fallback = emit::fallback(&def);
         quote!(#(#errs)* #fallback)
     };
-    let analysis = match shake_symbolic::analyse(&def) {
+    let analysis = match geoshake_symbolic::analyse(&def) {
         Ok(a) => a,
         Err(es) => return errors(es),
     };

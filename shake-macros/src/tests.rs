@@ -144,7 +144,7 @@ fn display_is_readable() {
 }
 
 /// The macro's expansion time for chains of N links (d = 2N, m = N).
-/// Run with `cargo test -p shake-macros --release -- --ignored --nocapture expansion_time`.
+/// Run with `cargo test -p geoshake-macros --release -- --ignored --nocapture expansion_time`.
 #[test]
 #[ignore]
 fn expansion_time() {
@@ -169,7 +169,7 @@ fn expansion_time() {
 }
 
 /// The fixed-size classical step is emitted where the runtime can use it:
-/// `shake::classical::fixed` for one constraint, `shake::classical::fixed_m` with d and m
+/// `geoshake::classical::fixed` for one constraint, `geoshake::classical::fixed_m` with d and m
 /// as constants for two to eight, nothing beyond eight or when the
 /// classical path does not apply (g reads p).
 #[test]
@@ -203,7 +203,7 @@ fn the_fixed_size_step_is_emitted_for_one_to_eight_constraints() {
 }
 
 /// Prints the expansion of the pendulum (for reading the generated code).
-/// Run with `cargo test -p shake-macros -- --ignored --nocapture print_pendulum`.
+/// Run with `cargo test -p geoshake-macros -- --ignored --nocapture print_pendulum`.
 #[test]
 #[ignore]
 fn print_pendulum() {
@@ -360,7 +360,7 @@ pub(crate) fn expand_like_rustc(src: &str) -> (f64, bool, String) {
 }
 
 /// Expansion time of the hostile declarations (BENCHMARKS.md).
-/// Run with `cargo test -p shake-macros --release -- --ignored --nocapture
+/// Run with `cargo test -p geoshake-macros --release -- --ignored --nocapture
 /// hostile_timings`; `HOSTILE=<part of a name>` runs only the matching cases
 /// (one at a time is kinder to a machine when checking an old version that
 /// exhausts memory).
@@ -425,7 +425,7 @@ pub(crate) fn phases(src: &str) -> String {
 }
 
 /// Time per phase for one hostile family at size `N`:
-/// `HOSTILE=arm N=24 cargo test -p shake-macros --release -- --ignored --nocapture hostile_phases`.
+/// `HOSTILE=arm N=24 cargo test -p geoshake-macros --release -- --ignored --nocapture hostile_phases`.
 #[test]
 #[ignore = "a measurement, not a check"]
 fn hostile_phases() {
@@ -586,7 +586,7 @@ fn friendly_errors() {
 /// Parameters named as in the mathematics are accepted, in the scalar and
 /// the particle form: the fields keep the names, `new`'s arguments do not
 /// (an argument `L` would be a pattern if a constant `L` is in scope).
-/// `tests/capitalised_parameters.rs` compiles and runs such systems.
+/// `tests/suite/capitalised_parameters.rs` compiles and runs such systems.
 #[test]
 fn capitalised_parameters_are_fields_not_arguments() {
     let cases = [

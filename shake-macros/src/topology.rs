@@ -1,6 +1,6 @@
 //! Families over run-time tables: one template per family, lowered to a
 //! small local system, differentiated once, emitted as a
-//! `shake::runtime::particles::Stencil`.
+//! `geoshake::runtime::particles::Stencil`.
 //!
 //! A family `bond[k in bonds(a, b; length)]: norm2(x[a] - x[b]) - length^2`
 //! in a system of particles in R^D is the function
@@ -61,7 +61,7 @@ struct Template<'a> {
     scalars: HashMap<String, NodeId>,
     /// Bound `sum` indices, innermost last.
     sums: Vec<(String, i64)>,
-    /// Terms the `sum`s expanded so far (`shake_symbolic::lower::MAX_TERMS`).
+    /// Terms the `sum`s expanded so far (`geoshake_symbolic::lower::MAX_TERMS`).
     terms: u64,
     /// Build nodes as written (no canonical form): for the emitted value.
     raw: bool,
@@ -446,13 +446,13 @@ impl Template<'_> {
                 self.terms = self
                     .terms
                     .saturating_add(hi.saturating_sub(lo).max(0) as u64);
-                if self.terms > shake_symbolic::lower::MAX_TERMS {
+                if self.terms > geoshake_symbolic::lower::MAX_TERMS {
                     return Err(err(
                         var.span(),
                         format!(
                             "the `sum`s of this template expand to more than {} terms in all \
                              (nested sums multiply their lengths)",
-                            shake_symbolic::lower::MAX_TERMS
+                            geoshake_symbolic::lower::MAX_TERMS
                         ),
                     ));
                 }
@@ -833,7 +833,7 @@ fn emit_stencil(def: &ParticleDef, fam: &FamilyDecl, low: &Lowered) -> TokenStre
     };
     let doc = format!(
         " The {kind} family `{}` of [`{}`] over the table `{sig}`, as a \
-         [`Stencil`](::shake::runtime::particles::Stencil) (ARITY = {arity}, DIM = {dim}, DATA = \
+         [`Stencil`](::geoshake::runtime::particles::Stencil) (ARITY = {arity}, DIM = {dim}, DATA = \
          {ndata}): f = `{formula}`, with its gradient in straight-line code. Its fields are the \
          system's parameters.",
         fam.name, def.name
@@ -849,7 +849,7 @@ fn emit_stencil(def: &ParticleDef, fam: &FamilyDecl, low: &Lowered) -> TokenStre
 
         #[automatically_derived]
         #[allow(unused_variables, unused_mut, clippy::all, clippy::pedantic, clippy::nursery)]
-        impl ::shake::runtime::particles::Stencil for #sname {
+        impl ::geoshake::runtime::particles::Stencil for #sname {
             const ARITY: usize = #arity;
             const DIM: usize = #dim;
             const DATA: usize = #ndata;
@@ -936,8 +936,8 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
         table_fns.push(quote! {
             #[doc = #tdoc]
             #[must_use]
-            pub fn #tfn() -> ::shake::runtime::particles::Table {
-                ::shake::runtime::particles::Table::new(#arity, #ndata)
+            pub fn #tfn() -> ::geoshake::runtime::particles::Table {
+                ::geoshake::runtime::particles::Table::new(#arity, #ndata)
             }
         });
         if formulas.is_some() {
@@ -959,7 +959,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
                 let system = system.#with(#fname, #sname { #(#params: self.#params,)* }, #table)?;
             });
         }
-        args.push(quote!(#table: ::shake::runtime::particles::Table));
+        args.push(quote!(#table: ::geoshake::runtime::particles::Table));
     }
     let arg_list: Vec<String> = def
         .families
@@ -972,7 +972,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
          helpers for empty tables of the right shape). The runtime checks the topology: a \
          particle index beyond n, a particle named twice in a row, a member repeated, or a \
          wrongly shaped row is a \
-         [`TopologyError`](::shake::runtime::particles::TopologyError) naming the family and \
+         [`TopologyError`](::geoshake::runtime::particles::TopologyError) naming the family and \
          the member. Nondegeneracy (N = G M⁻¹ Gᵀ invertible, G the constraint gradient) \
          depends on the actual topology, so it is the runtime's to check, not the macro's: a \
          cluster of constraints with more constraints than the coordinates it moves can never \
@@ -987,7 +987,7 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
     );
     let body = if formulas.is_some() {
         quote! {
-            let system = ::shake::runtime::particles::ParticleSystem::new(#dim, masses)?;
+            let system = ::geoshake::runtime::particles::ParticleSystem::new(#dim, masses)?;
             #(#adds)*
             Ok(system)
         }
@@ -1019,8 +1019,8 @@ fn emit_struct(def: &ParticleDef, formulas: Option<&[String]>) -> TokenStream {
                 masses: ::std::vec::Vec<f64>,
                 #(#args),*
             ) -> ::core::result::Result<
-                ::shake::runtime::particles::ParticleSystem,
-                ::shake::runtime::particles::TopologyError,
+                ::geoshake::runtime::particles::ParticleSystem,
+                ::geoshake::runtime::particles::TopologyError,
             > {
                 #body
             }
@@ -1266,7 +1266,7 @@ mod tests {
 
     /// Expansion time of the run-time topology declarations, and of the
     /// refusal of a compile-time family of 2000 constraints on 8 coordinates:
-    /// `cargo test -p shake-macros --release -- --ignored --nocapture expansion_of_topologies`.
+    /// `cargo test -p geoshake-macros --release -- --ignored --nocapture expansion_of_topologies`.
     #[test]
     #[ignore = "a measurement, not a check"]
     fn expansion_of_topologies() {

@@ -8,7 +8,7 @@ Same systems (the planar pendulum and chains of 4, 16 and 64 unit masses
 and rods, anchored at the origin, in gravity), same H = V(q) + |p|²/2, same
 step size h, same scheme: mici's ConstrainedLeapfrogIntegrator
 is RATTLE over Störmer–Verlet (position projection by Newton, then the
-velocity projection), ours is `shake.rattle(..., base="verlet")`. mici gets
+velocity projection), ours is `geoshake.rattle(..., base="verlet")`. mici gets
 hand-written gradients and Jacobians (no autodiff cost). Both start on M and
 M^H (the chain straight and horizontal, at rest). mici's projection stops
 at |g| ≤ 1e-10 and a position change ≤ 1e-10; ours with its defaults (Newton
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-import shake
+import geoshake
 
 try:
     import mici
@@ -115,7 +115,7 @@ def time_ours(system, n, steps):
     z0 = np.concatenate([q, p])
 
     def go():
-        shake.rattle(
+        geoshake.rattle(
             system, z0, H, steps=steps, base="verlet", multipliers=False,
             stride=steps,
         )
@@ -131,7 +131,7 @@ def agreement(system, n, steps=100):
     state = mici.states.ChainState(pos=q.copy(), mom=p.copy(), dir=1)
     for _ in range(steps):
         state = integrator.step(state)
-    ours = shake.rattle(system, np.concatenate([q, p]), H, steps=steps, base="verlet")
+    ours = geoshake.rattle(system, np.concatenate([q, p]), H, steps=steps, base="verlet")
     z = ours.trajectory[-1]
     return max(np.abs(z[: 2 * n] - state.pos).max(), np.abs(z[2 * n :] - state.mom).max())
 
@@ -139,13 +139,13 @@ def agreement(system, n, steps=100):
 def main():
     rows = []
     for name, n, compiled in [
-        ("pendulum", 1, shake.models.Pendulum),
-        ("chain 4", 4, shake.models.Chain4),
-        ("chain 16", 16, shake.models.Chain16),
-        ("chain 64", 64, shake.models.Chain64),
+        ("pendulum", 1, geoshake.models.Pendulum),
+        ("chain 4", 4, geoshake.models.Chain4),
+        ("chain 16", 16, geoshake.models.Chain16),
+        ("chain 64", 64, geoshake.models.Chain64),
     ]:
         src = chain_source(n)
-        declared = shake.declare(src, length=1.0, gravity=GRAVITY)
+        declared = geoshake.declare(src, length=1.0, gravity=GRAVITY)
         comp = compiled(length=1.0, gravity=GRAVITY)
         # Short runs (10 s of a chain falling from horizontal): a long run of
         # a chain whips its last links past what h = 0.01 resolves.

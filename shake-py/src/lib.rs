@@ -1,11 +1,16 @@
-//! `shake._shake`, the extension module behind the Python package `shake`:
-//! systems declared from strings (`shake::declared`) or compiled
-//! (`shake.models`), run by SHAKE or RATTLE over a base map, with NumPy
+//! `geoshake._geoshake`, the extension module behind the Python package `shake`:
+//! systems declared from strings (`geoshake::declared`) or compiled
+//! (`geoshake.models`), run by SHAKE or RATTLE over a base map, with NumPy
 //! arrays out and every failure a Python exception that carries the partial
 //! trajectory.
 
 mod models;
 
+use geoshake::declared::{DeclareError, DeclaredSystem};
+use geoshake::{
+    BaseMap, ConstrainedSystem, Hamiltonian, ImplicitMidpoint, Integrator, Options, RunOutcome,
+    State, StepError, Stop, StormerVerlet, SymplecticEuler,
+};
 use models::Model;
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArrayDyn};
@@ -13,75 +18,70 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use shake::declared::{DeclareError, DeclaredSystem};
-use shake::{
-    BaseMap, ConstrainedSystem, Hamiltonian, ImplicitMidpoint, Integrator, Options, RunOutcome,
-    State, StepError, Stop, StormerVerlet, SymplecticEuler,
-};
 
 create_exception!(
-    _shake,
+    _geoshake,
     ShakeError,
     PyException,
     "Every error of shake. A run's errors carry `step`, `time`, `residual` (NaN when the error has none) and the partial trajectory (`trajectory`, `times`, `steps`, `lambda_`, `sigma`)."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     DeclarationError,
     ShakeError,
     "A declaration refused: `message`, and `line`, `column` (1-based) of the offending token in the string."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     ParameterError,
     ShakeError,
     "A parameter unknown, missing or given twice."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     InvalidInputError,
     ShakeError,
     "An unusable argument: h = 0 or not finite, a state of the wrong dimension, ..."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     NonFiniteError,
     ShakeError,
     "A state (given or computed) has a NaN or infinite entry."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     NewtonError,
     ShakeError,
     "A Newton iteration did not converge (`residual` is its last residual)."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     NondegeneracyError,
     ShakeError,
     "N = {{H,g_i},g_j} became singular or ill-conditioned (the paper's nondegeneracy assumption)."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     ComponentJumpError,
     ShakeError,
     "det N changed sign: the trajectory jumped to another component of M^H (Section 5.4.2)."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     FibreJumpError,
     ShakeError,
     "Newton along a fibre converged far from its linear prediction (a fold or another component)."
 );
 create_exception!(
-    _shake,
+    _geoshake,
     NotOnConstraintError,
     ShakeError,
     "The initial state is not on M = {g = 0} (`residual` is |g|)."
 );
 
 /// A constrained Hamiltonian system: declared from a string
-/// (`shake.declare`) or compiled (`shake.models`).
+/// (`geoshake.declare`) or compiled (`geoshake.models`).
 #[pyclass(frozen, module = "shake")]
 struct System {
     model: Model,
@@ -113,14 +113,14 @@ impl System {
     #[getter]
     fn kind(&self) -> &'static str {
         match with_model!(&self.model, s => s.kind()) {
-            shake::ConstraintKind::None => "none",
-            shake::ConstraintKind::Holonomic => "holonomic",
-            shake::ConstraintKind::Quadratic => "quadratic",
-            shake::ConstraintKind::General => "general",
+            geoshake::ConstraintKind::None => "none",
+            geoshake::ConstraintKind::Holonomic => "holonomic",
+            geoshake::ConstraintKind::Quadratic => "quadratic",
+            geoshake::ConstraintKind::General => "general",
         }
     }
 
-    /// True when the system is compiled (a `shake.models` class), False
+    /// True when the system is compiled (a `geoshake.models` class), False
     /// when declared from a string and interpreted.
     #[getter]
     fn compiled(&self) -> bool {
@@ -192,7 +192,7 @@ impl System {
             "declared"
         };
         format!(
-            "<shake.System {} ({how}, d={}, m={}, {})>",
+            "<geoshake.System {} ({how}, d={}, m={}, {})>",
             self.name,
             self.dof(),
             self.constraint_count(),
@@ -249,7 +249,7 @@ fn declare(source: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<Sys
     })
 }
 
-/// A compiled model of `shake.models` by name, parameters by name.
+/// A compiled model of `geoshake.models` by name, parameters by name.
 #[pyfunction]
 #[pyo3(signature = (name, **parameters))]
 fn model(name: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<System> {
@@ -324,7 +324,7 @@ impl Result_ {
     }
 
     fn __repr__(&self, py: Python<'_>) -> String {
-        format!("<shake.Result: {} states>", self.__len__(py))
+        format!("<geoshake.Result: {} states>", self.__len__(py))
     }
 }
 
@@ -388,7 +388,7 @@ fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
         StepError::NonFinite { t, .. } => (NonFiniteError::new_err(msg), *t, nan),
         StepError::NewtonNotConverged { t, source, .. } => {
             let r = match source {
-                shake::SolveError::NotConverged { residual, .. } => *residual,
+                geoshake::SolveError::NotConverged { residual, .. } => *residual,
                 _ => nan,
             };
             (NewtonError::new_err(msg), *t, r)
@@ -469,7 +469,7 @@ fn integrator<S: ConstrainedSystem, B: BaseMap>(s: S, base: B, plan: &Plan) -> I
 
 /// Runs every initial state (rows of `z0s`) on all cores.
 fn run_all(model: &Model, base: &str, plan: &Plan, z0s: &[Vec<f64>]) -> Vec<RunOutcome> {
-    use shake::rayon::prelude::*;
+    use geoshake::rayon::prelude::*;
     macro_rules! go {
         ($b:expr) => {
             with_model!(model, s => {
@@ -735,7 +735,7 @@ fn ensemble(
 }
 
 #[pymodule]
-fn _shake(m: &Bound<'_, PyModule>) -> PyResult<()> {
+fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<System>()?;
     m.add_class::<Result_>()?;

@@ -1,9 +1,9 @@
-//! The compiled systems `shake.models` offers: the facade's models
-//! (`shake::models`) and the chains the benchmarks compare, each declared
+//! The compiled systems `geoshake.models` offers: the facade's models
+//! (`geoshake::models`) and the chains the benchmarks compare, each declared
 //! with `constrained_system!` so its derivatives are straight-line code.
 
-use shake::constrained_system;
-pub use shake::models::{
+use geoshake::constrained_system;
+pub use geoshake::models::{
     Chain8, DoublePendulum, HopfFree, HopfGravity, IndexOne, Pendulum, SphericalPendulum,
 };
 
@@ -50,7 +50,7 @@ chain!(
 #[derive(Clone, Debug)]
 #[allow(clippy::large_enum_variant)]
 pub enum Model {
-    Declared(shake::declared::DeclaredSystem),
+    Declared(geoshake::declared::DeclaredSystem),
     Pendulum(Pendulum),
     SphericalPendulum(SphericalPendulum),
     DoublePendulum(DoublePendulum),
@@ -107,7 +107,7 @@ pub fn compiled(name: &str, get: &dyn Fn(&str) -> Option<f64>) -> Result<Option<
     }))
 }
 
-/// The compiled models and their parameter names, for `shake.models`.
+/// The compiled models and their parameter names, for `geoshake.models`.
 pub const MODELS: &[(&str, &[&str])] = &[
     ("Pendulum", &["length", "gravity"]),
     ("SphericalPendulum", &["length", "gravity"]),

@@ -9,7 +9,7 @@ O(h) difference a wrong derivative would make.
 import numpy as np
 import pytest
 
-import shake
+import geoshake
 
 EPS = np.finfo(float).eps
 
@@ -38,12 +38,12 @@ def close_to_roundoff(a, b):
 @pytest.mark.parametrize("method", ["rattle", "shake"])
 @pytest.mark.parametrize("base", ["midpoint", "verlet"])
 def test_pendulum_from_a_string_steps_as_the_compiled_model(method, base):
-    declared = shake.declare(PENDULUM, length=1.5, gravity=9.81)
-    compiled = shake.models.Pendulum(length=1.5, gravity=9.81)
+    declared = geoshake.declare(PENDULUM, length=1.5, gravity=9.81)
+    compiled = geoshake.models.Pendulum(length=1.5, gravity=9.81)
     assert not declared.compiled and compiled.compiled
     z0 = np.array([1.5, 0.0, 0.0, 0.3])
-    a = shake.run(declared, z0, 0.05, steps=100, method=method, base=base)
-    b = shake.run(compiled, z0, 0.05, steps=100, method=method, base=base)
+    a = geoshake.run(declared, z0, 0.05, steps=100, method=method, base=base)
+    b = geoshake.run(compiled, z0, 0.05, steps=100, method=method, base=base)
     assert a.trajectory.shape == (101, 4)
     assert close_to_roundoff(a.trajectory, b.trajectory)
     # On M: |q| = length to round-off at every stored state.
@@ -53,20 +53,20 @@ def test_pendulum_from_a_string_steps_as_the_compiled_model(method, base):
 
 def test_hopf_from_a_string_steps_as_the_compiled_model():
     params = dict(g0=0.0, g1=-1.0, radius2=0.98)
-    declared = shake.declare(HOPF, **params)
-    compiled = shake.models.HopfGravity(**params)
+    declared = geoshake.declare(HOPF, **params)
+    compiled = geoshake.models.HopfGravity(**params)
     assert declared.kind == compiled.kind == "quadratic"
     # On M (|q|² + |p|² = 0.98), away from the points where N vanishes.
     z0 = np.array([0.8, 0.2, 0.3, np.sqrt(0.21)])
-    a = shake.rattle(declared, z0, 0.1, steps=100, base="verlet")
-    b = shake.rattle(compiled, z0, 0.1, steps=100, base="verlet")
+    a = geoshake.rattle(declared, z0, 0.1, steps=100, base="verlet")
+    b = geoshake.rattle(compiled, z0, 0.1, steps=100, base="verlet")
     assert close_to_roundoff(a.trajectory, b.trajectory)
     assert close_to_roundoff(a.lambda_[:-1], b.lambda_[:-1])
 
 
 def test_times_steps_and_stride():
-    sys = shake.models.Pendulum(length=1.0, gravity=1.0)
-    out = shake.rattle(sys, np.array([1.0, 0.0, 0.0, 0.0]), 0.1, steps=10, stride=5)
+    sys = geoshake.models.Pendulum(length=1.0, gravity=1.0)
+    out = geoshake.rattle(sys, np.array([1.0, 0.0, 0.0, 0.0]), 0.1, steps=10, stride=5)
     assert list(out.steps) == [0, 5, 10]
     assert np.allclose(out.times, [0.0, 0.5, 1.0], rtol=0, atol=4 * EPS)
 
@@ -76,8 +76,8 @@ def test_multipliers_are_returned_and_match_the_rod_tension():
     # the weight: the DAE's multiplier is λ_c = g/2 (p' = -H_q - λ_c ∇g,
     # ∇g = 2q), and for Störmer–Verlet λ = (h/2) λ_c (the first half kick).
     g, h = 9.81, 0.01
-    sys = shake.declare(PENDULUM, length=1.0, gravity=g)
-    out = shake.rattle(sys, np.array([0.0, -1.0, 0.0, 0.0]), h, steps=3, base="verlet")
+    sys = geoshake.declare(PENDULUM, length=1.0, gravity=g)
+    out = geoshake.rattle(sys, np.array([0.0, -1.0, 0.0, 0.0]), h, steps=3, base="verlet")
     assert out.lambda_.shape == (4, 1) and out.sigma.shape == (4, 1)
     assert np.isnan(out.lambda_[-1, 0])
     assert abs(out.lambda_[0, 0] - h / 2 * g / 2) <= 1e-12
@@ -93,24 +93,24 @@ struct Polar {
     hamiltonian = (p_x^2 + p_y^2) / 2;
     constraints { rod: x^2 + y^2 - length^2 }
 }"""
-    sys = shake.declare(src, length=1.0)
+    sys = geoshake.declare(src, length=1.0)
     assert sys.variable_names == ["x", "y", "p_x", "p_y"]
     assert sys.constraint_names == ["rod"]
-    pendulum = shake.declare(PENDULUM, length=1.0, gravity=9.81)
+    pendulum = geoshake.declare(PENDULUM, length=1.0, gravity=9.81)
     assert pendulum.variable_names == ["q[0]", "q[1]", "p[0]", "p[1]"]
 
 
 def test_a_bad_declaration_raises_with_its_position():
     src = PENDULUM.replace("gravity * q[1]", "gravty * q[1]")
-    with pytest.raises(shake.DeclarationError) as info:
-        shake.declare(src, length=1.0, gravity=9.81)
+    with pytest.raises(geoshake.DeclarationError) as info:
+        geoshake.declare(src, length=1.0, gravity=9.81)
     e = info.value
     lines = src.splitlines()
     assert e.line == next(i for i, l in enumerate(lines, 1) if "gravty" in l)
     line = lines[e.line - 1]
     assert e.column == line.index("gravty") + 1
     assert "gravity" in e.message
-    assert isinstance(e, shake.ShakeError)
+    assert isinstance(e, geoshake.ShakeError)
 
 
 def test_a_refused_system_raises_the_theory_check():
@@ -119,31 +119,31 @@ def test_a_refused_system_raises_the_theory_check():
         hamiltonian = (p[0]^2 + p[1]^2) / 2;
         constraints { a: q[0], b: p[0] }
     }"""
-    with pytest.raises(shake.DeclarationError) as info:
-        shake.declare(src)
+    with pytest.raises(geoshake.DeclarationError) as info:
+        geoshake.declare(src)
     assert "coisotropic" in info.value.message
     assert (info.value.line, info.value.column) == (4, 23)
 
 
 def test_parameters_by_name_are_checked():
-    with pytest.raises(shake.ParameterError):
-        shake.declare(PENDULUM, length=1.0)
-    with pytest.raises(shake.ParameterError):
-        shake.declare(PENDULUM, length=1.0, gravity=1.0, mass=2.0)
-    with pytest.raises(shake.ParameterError):
-        shake.models.Pendulum(length=1.0)
+    with pytest.raises(geoshake.ParameterError):
+        geoshake.declare(PENDULUM, length=1.0)
+    with pytest.raises(geoshake.ParameterError):
+        geoshake.declare(PENDULUM, length=1.0, gravity=1.0, mass=2.0)
+    with pytest.raises(geoshake.ParameterError):
+        geoshake.models.Pendulum(length=1.0)
 
 
 def test_a_failing_run_raises_with_the_partial_trajectory():
     # h = 0.3 is far past the pendulum's stability limit at this energy
     # (period ~2, velocity 3): after a few steps the fibre no longer meets
     # M near the base map's point and SHAKE's Newton for λ fails.
-    sys = shake.declare(PENDULUM, length=1.0, gravity=9.81)
+    sys = geoshake.declare(PENDULUM, length=1.0, gravity=9.81)
     z0 = np.array([1.0, 0.0, 0.0, 3.0])
-    with pytest.raises(shake.NewtonError) as info:
-        shake.rattle(sys, z0, 0.3, steps=1000, base="midpoint")
+    with pytest.raises(geoshake.NewtonError) as info:
+        geoshake.rattle(sys, z0, 0.3, steps=1000, base="midpoint")
     e = info.value
-    assert isinstance(e, shake.ShakeError)
+    assert isinstance(e, geoshake.ShakeError)
     assert e.step >= 2
     n = e.trajectory.shape[0]
     assert e.trajectory.shape == (n, 4) and n >= 2
@@ -160,21 +160,21 @@ def test_a_run_of_more_steps_than_f64_counts_is_refused(stride):
     # 2**63 steps: stride 1 killed the interpreter (the trajectory grew
     # until the allocator aborted), stride 2**62 never returned. Beyond
     # 2**53 the step index k is not exact in f64, nor the times t0 + k*h.
-    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
     z0 = np.array([0.0, -1.0, 0.0, 0.0])
-    with pytest.raises(shake.InvalidInputError) as info:
-        shake.rattle(sys, z0, 0.01, steps=2**63, stride=stride)
+    with pytest.raises(geoshake.InvalidInputError) as info:
+        geoshake.rattle(sys, z0, 0.01, steps=2**63, stride=stride)
     assert "2^53" in str(info.value)
     assert info.value.step == 0
 
 
 def test_ensembles_run_every_member():
-    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
     z0s = np.array([[np.cos(a), np.sin(a), 0.0, 0.0] for a in np.linspace(-1, 1, 8)])
-    outs = shake.ensemble(sys, z0s, 0.01, steps=50)
+    outs = geoshake.ensemble(sys, z0s, 0.01, steps=50)
     assert len(outs) == 8
     for z0, out in zip(z0s, outs):
-        single = shake.rattle(sys, z0, 0.01, steps=50)
+        single = geoshake.rattle(sys, z0, 0.01, steps=50)
         assert np.array_equal(out.trajectory, single.trajectory)
 
 
@@ -190,18 +190,18 @@ def test_chains_compiled_and_declared_agree():
                 else {{ (q[2*k] - q[2*k-2])^2 + (q[2*k+1] - q[2*k-1])^2 - length^2 }},
         }}
     }}"""
-    declared = shake.declare(src, length=1.0, gravity=9.81)
-    compiled = shake.models.Chain4(length=1.0, gravity=9.81)
+    declared = geoshake.declare(src, length=1.0, gravity=9.81)
+    compiled = geoshake.models.Chain4(length=1.0, gravity=9.81)
     q = np.ravel([[k + 1.0, 0.0] for k in range(n)])
     z0 = np.concatenate([q, np.zeros(2 * n)])
-    a = shake.rattle(declared, z0, 0.01, steps=50, base="verlet")
-    b = shake.rattle(compiled, z0, 0.01, steps=50, base="verlet")
+    a = geoshake.rattle(declared, z0, 0.01, steps=50, base="verlet")
+    b = geoshake.rattle(compiled, z0, 0.01, steps=50, base="verlet")
     assert close_to_roundoff(a.trajectory, b.trajectory)
 
 
 def test_states_of_integers_or_other_real_dtypes_are_converted():
-    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
-    want = shake.rattle(sys, np.array([1.0, 0.0, 0.0, 0.0]), 0.01, steps=5).trajectory
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    want = geoshake.rattle(sys, np.array([1.0, 0.0, 0.0, 0.0]), 0.01, steps=5).trajectory
     for z0 in (
         np.array([1, 0, 0, 0]),
         [1, 0, 0, 0],
@@ -209,10 +209,10 @@ def test_states_of_integers_or_other_real_dtypes_are_converted():
         np.array([1.0, 0.0, 0.0, 0.0], dtype=">f8"),
         np.array([1.0, 9.0, 0.0, 9.0, 0.0, 9.0, 0.0])[::2],
     ):
-        out = shake.rattle(sys, z0, 0.01, steps=5)
+        out = geoshake.rattle(sys, z0, 0.01, steps=5)
         assert np.array_equal(out.trajectory, want), z0
     z0s = np.array([[1, 0, 0, 0], [0, -1, 1, 0]])
-    assert len(shake.ensemble(sys, z0s, 0.01, steps=5)) == 2
+    assert len(geoshake.ensemble(sys, z0s, 0.01, steps=5)) == 2
     assert sys.hamiltonian([0, -1, 1, 0]) == 0.5 - 9.81
 
 
@@ -230,26 +230,26 @@ def test_states_of_integers_or_other_real_dtypes_are_converted():
 )
 def test_a_state_of_the_wrong_kind_or_shape_says_what_is_expected(z0, says):
     # Each of these said "'ndarray' object cannot be cast as 'ndarray'".
-    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
-    with pytest.raises(shake.InvalidInputError) as info:
-        shake.rattle(sys, z0, 0.01, steps=5)
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    with pytest.raises(geoshake.InvalidInputError) as info:
+        geoshake.rattle(sys, z0, 0.01, steps=5)
     assert says in str(info.value)
     assert "z0" in str(info.value)
 
 
 def test_unknown_option_values_are_refused():
     # errors="bogus" was taken as "raise".
-    sys = shake.models.Pendulum(length=1.0, gravity=9.81)
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
     z0s = np.array([[1.0, 0.0, 0.0, 0.0]])
-    with pytest.raises(shake.InvalidInputError) as info:
-        shake.ensemble(sys, z0s, 0.01, steps=5, errors="bogus")
+    with pytest.raises(geoshake.InvalidInputError) as info:
+        geoshake.ensemble(sys, z0s, 0.01, steps=5, errors="bogus")
     assert "bogus" in str(info.value)
-    with pytest.raises(shake.InvalidInputError):
-        shake.ensemble(sys, np.zeros(4), 0.01, steps=5)
+    with pytest.raises(geoshake.InvalidInputError):
+        geoshake.ensemble(sys, np.zeros(4), 0.01, steps=5)
 
 
 def test_a_constant_outside_a_function_domain_is_a_declaration_error():
     # sqrt(-1) in H was accepted, and H was NaN at every state.
-    with pytest.raises(shake.DeclarationError) as info:
-        shake.declare(PENDULUM.replace("gravity * q[1]", "sqrt(-1) * q[1]"), length=1.0, gravity=9.81)
+    with pytest.raises(geoshake.DeclarationError) as info:
+        geoshake.declare(PENDULUM.replace("gravity * q[1]", "sqrt(-1) * q[1]"), length=1.0, gravity=9.81)
     assert "sqrt" in str(info.value)

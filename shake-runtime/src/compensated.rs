@@ -8,7 +8,7 @@
 //! O(ε|Δ|) = O(εh) — *provided Δ_n itself is computed as a small quantity*
 //! and not as the difference of two rounded states. This module computes
 //! SHAKE's increment that way, and it is the only way SHAKE computes a
-//! step (`shake::increment`, one Newton iteration for plain and compensated
+//! step (`geoshake::increment`, one Newton iteration for plain and compensated
 //! runs alike):
 //!
 //! Δ(λ) = [exp(Σ λ_i X_{g_i})(z) − z] + [φ_h(y) − y],  y = z + first bracket,
@@ -43,7 +43,7 @@
 //! n = 10⁵).
 //!
 //! ```
-//! use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+//! use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 //! let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
 //! let plain = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
 //!     .compensated(false)

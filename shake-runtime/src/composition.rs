@@ -70,7 +70,7 @@
 //! round-off, and measure the orders against independent references.
 //!
 //! ```
-//! use shake_runtime::{Composition, Integrator, StormerVerlet, State, examples::Pendulum};
+//! use geoshake_runtime::{Composition, Integrator, StormerVerlet, State, examples::Pendulum};
 //! let mut rattle4 = Integrator::new(Pendulum::default(), StormerVerlet, 0.1)
 //!     .composed(Composition::TRIPLE_JUMP);
 //! assert_eq!(rattle4.order(), 4);
@@ -84,7 +84,7 @@
 /// A symmetric composition scheme: the substeps γ_1 h, …, γ_s h of one step.
 ///
 /// ```
-/// use shake_runtime::Composition;
+/// use geoshake_runtime::Composition;
 /// let c = Composition::TRIPLE_JUMP;
 /// assert_eq!((c.order(), c.stages()), (4, 3));
 /// assert!((c.coefficients().iter().sum::<f64>() - 1.0).abs() < 1e-15);
@@ -225,7 +225,7 @@ impl Composition {
     /// Every scheme of this module, in order of increasing order.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::Composition::ALL.len(), 7);
+    /// assert_eq!(geoshake_runtime::Composition::ALL.len(), 7);
     /// ```
     pub const ALL: [Composition; 7] = [
         Composition::SINGLE,
@@ -240,7 +240,7 @@ impl Composition {
     /// A name for reports.
     ///
     /// ```
-    /// assert!(shake_runtime::Composition::KAHAN_LI_8.name().contains("s17odr8a"));
+    /// assert!(geoshake_runtime::Composition::KAHAN_LI_8.name().contains("s17odr8a"));
     /// ```
     pub fn name(&self) -> &'static str {
         self.name
@@ -251,7 +251,7 @@ impl Composition {
     /// order is not raised; see [`Integrator::order`](crate::Integrator::order).
     ///
     /// ```
-    /// assert_eq!(shake_runtime::Composition::MCLACHLAN_8.order(), 8);
+    /// assert_eq!(geoshake_runtime::Composition::MCLACHLAN_8.order(), 8);
     /// ```
     pub fn order(&self) -> u32 {
         self.order
@@ -260,7 +260,7 @@ impl Composition {
     /// The number s of substeps.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::Composition::SUZUKI_5.stages(), 5);
+    /// assert_eq!(geoshake_runtime::Composition::SUZUKI_5.stages(), 5);
     /// ```
     pub fn stages(&self) -> usize {
         self.coefficients.len()
@@ -269,7 +269,7 @@ impl Composition {
     /// γ_1, …, γ_s: substep k has size γ_k h.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::Composition::SINGLE.coefficients(), &[1.0]);
+    /// assert_eq!(geoshake_runtime::Composition::SINGLE.coefficients(), &[1.0]);
     /// ```
     pub fn coefficients(&self) -> &'static [f64] {
         self.coefficients
@@ -278,7 +278,7 @@ impl Composition {
     /// max_k |γ_k|: the largest substep, in units of h.
     ///
     /// ```
-    /// let g = shake_runtime::Composition::TRIPLE_JUMP.max_substep();
+    /// let g = geoshake_runtime::Composition::TRIPLE_JUMP.max_substep();
     /// assert!((g - 1.7024143839193153).abs() < 1e-15);
     /// ```
     pub fn max_substep(&self) -> f64 {

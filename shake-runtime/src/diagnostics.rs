@@ -20,9 +20,9 @@
 /// Measurements at one recorded state and over the steps leading to it.
 ///
 /// ```
-/// use shake_runtime::{Integrator, ImplicitMidpoint, Stop, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, ImplicitMidpoint, Stop, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.05).with_diagnostics();
-/// let z0 = integ.project_to_hidden(&shake_runtime::State::from_slices(&[0.6, -0.8], &[0.8, 0.6])).unwrap();
+/// let z0 = integ.project_to_hidden(&geoshake_runtime::State::from_slices(&[0.6, -0.8], &[0.8, 0.6])).unwrap();
 /// let out = integ.run(z0, Stop::Steps(20)).stride(10).execute();
 /// let rec = &out.trajectory.diagnostics[2];
 /// assert_eq!(rec.step, 20);

@@ -33,9 +33,9 @@
 //! states, template, stop and options.
 //!
 //! ```no_run
-//! use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
-//! use shake_runtime::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
-//! use shake_runtime::mpi::{self, Threading};
+//! use geoshake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+//! use geoshake_runtime::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
+//! use geoshake_runtime::mpi::{self, Threading};
 //!
 //! let (universe, _) = mpi::initialize_with_threading(Threading::Funneled).unwrap();
 //! let world = universe.world();
@@ -66,7 +66,7 @@ use std::time::Instant;
 /// How [`run_ensemble_mpi`] distributes and records an ensemble.
 ///
 /// ```
-/// use shake_runtime::ensemble_mpi::MpiEnsemble;
+/// use geoshake_runtime::ensemble_mpi::MpiEnsemble;
 /// let o = MpiEnsemble { batch: 4096, ..MpiEnsemble::default() };
 /// assert!(o.store.is_none() && o.collect);
 /// ```
@@ -109,7 +109,7 @@ impl Default for MpiEnsemble {
 /// `ensemble members=… ok=… failed=… ranks=… threads=… members_per_s=…`.
 ///
 /// ```
-/// use shake_runtime::ensemble_mpi::EnsembleSummary;
+/// use geoshake_runtime::ensemble_mpi::EnsembleSummary;
 /// let s = EnsembleSummary { members: 10, ok: 9, failed: 1, computed: 10, resumed: 0,
 ///     pending: 0, ranks: 2, threads: 1, seconds: 0.5, words: 190 };
 /// assert_eq!(s.members_per_second(), 20.0);
@@ -187,7 +187,7 @@ pub struct MpiEnsembleResults {
 /// waiting in a collective call.
 ///
 /// ```
-/// use shake_runtime::ensemble_mpi::MpiEnsembleError;
+/// use geoshake_runtime::ensemble_mpi::MpiEnsembleError;
 /// assert!(MpiEnsembleError::OnRankZero.to_string().contains("rank 0"));
 /// ```
 #[derive(Debug, thiserror::Error)]
@@ -233,9 +233,9 @@ pub enum MpiEnsembleError {
 /// error: the job could not be consistent).
 ///
 /// ```no_run
-/// # use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
-/// # use shake_runtime::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
-/// let universe = shake_runtime::mpi::initialize().unwrap();
+/// # use geoshake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+/// # use geoshake_runtime::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
+/// let universe = geoshake_runtime::mpi::initialize().unwrap();
 /// let rattle = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).rattle();
 /// let starts = vec![Pendulum::default().state(0.5, 0.0); 100];
 /// let r = run_ensemble_mpi(&universe.world(), &rattle, &starts, Stop::Steps(100), 100,

@@ -23,8 +23,8 @@
 //! other values is an error, not a silent mix of two ensembles.
 //!
 //! ```
-//! use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
-//! use shake_runtime::ensemble_store::EnsembleStore;
+//! use geoshake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+//! use geoshake_runtime::ensemble_store::EnsembleStore;
 //! let dir = std::env::temp_dir().join(format!("shake-store-doc-{}", std::process::id()));
 //! let _ = std::fs::remove_dir_all(&dir);
 //! let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).rattle();
@@ -53,7 +53,7 @@ const HEADER: &str = "# shake ensemble manifest v1";
 /// Why a store could not be opened, written or read.
 ///
 /// ```
-/// use shake_runtime::ensemble_store::{EnsembleStore, StoreError};
+/// use geoshake_runtime::ensemble_store::{EnsembleStore, StoreError};
 /// // A directory inside a file cannot be created.
 /// let file = std::env::temp_dir().join(format!("shake-store-doc0-{}", std::process::id()));
 /// std::fs::write(&file, b"").unwrap();
@@ -106,7 +106,7 @@ struct Entry {
 /// [module docs](self)).
 ///
 /// ```
-/// use shake_runtime::ensemble_store::EnsembleStore;
+/// use geoshake_runtime::ensemble_store::EnsembleStore;
 /// let dir = std::env::temp_dir().join(format!("shake-store-doc2-{}", std::process::id()));
 /// let _ = std::fs::remove_dir_all(&dir);
 /// let store = EnsembleStore::open(&dir, 4, "job").unwrap();
@@ -130,7 +130,7 @@ impl EnsembleStore {
     /// none and resuming it otherwise.
     ///
     /// ```
-    /// use shake_runtime::ensemble_store::EnsembleStore;
+    /// use geoshake_runtime::ensemble_store::EnsembleStore;
     /// let dir = std::env::temp_dir().join(format!("shake-store-doc3-{}", std::process::id()));
     /// let _ = std::fs::remove_dir_all(&dir);
     /// drop(EnsembleStore::open(&dir, 4, "job").unwrap());
@@ -240,8 +240,8 @@ impl EnsembleStore {
     /// last outcome.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-    /// use shake_runtime::ensemble_store::EnsembleStore;
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::ensemble_store::EnsembleStore;
     /// let dir = std::env::temp_dir().join(format!("shake-store-doc4-{}", std::process::id()));
     /// let _ = std::fs::remove_dir_all(&dir);
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);

@@ -7,7 +7,7 @@ use std::fmt;
 /// Which implicit equation of a step failed.
 ///
 /// ```
-/// use shake_runtime::Stage;
+/// use geoshake_runtime::Stage;
 /// assert_eq!(Stage::Shake.to_string(), "SHAKE (λ such that g(z1⁻) = 0)");
 /// ```
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
@@ -41,7 +41,7 @@ impl fmt::Display for Stage {
 /// step context; [`StepError`] adds where and when.
 ///
 /// ```
-/// use shake_runtime::SolveError;
+/// use geoshake_runtime::SolveError;
 /// let e = SolveError::NotConverged { iterations: 50, residual: 1e-3 };
 /// assert!(e.to_string().contains("50 iterations"));
 /// ```
@@ -74,7 +74,7 @@ pub enum SolveError {
 /// dropped, so that t = 0.30000000000000004 reads `0.3`.
 ///
 /// ```
-/// use shake_runtime::error::human;
+/// use geoshake_runtime::error::human;
 /// assert_eq!(human(0.30000000000000004), "0.3");
 /// assert_eq!(human(12.5), "12.5");
 /// assert_eq!(human(1e-9), "1.0e-9");
@@ -98,7 +98,7 @@ pub fn human(x: f64) -> String {
 /// in scientific notation outside (`1.2e-9`), never `4.0e0`.
 ///
 /// ```
-/// use shake_runtime::error::sci;
+/// use geoshake_runtime::error::sci;
 /// assert_eq!(sci(4.0), "4");
 /// assert_eq!(sci(0.25), "0.25");
 /// assert_eq!(sci(1234.0), "1200");
@@ -151,9 +151,9 @@ fn reverse_outcome(miss: Option<f64>, tolerance: f64, cause: Option<&StepError>)
 /// [`Integrator::step`](crate::Integrator::step) is step 1 from t0 = 0.
 ///
 /// ```
-/// use shake_runtime::{Integrator, StormerVerlet, StepError, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, StormerVerlet, StepError, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, f64::NAN);
-/// let z0 = shake_runtime::State::from_slices(&[1.0, 0.0], &[0.0, 0.0]);
+/// let z0 = geoshake_runtime::State::from_slices(&[1.0, 0.0], &[0.0, 0.0]);
 /// assert!(matches!(integ.step(&z0), Err(StepError::InvalidInput { .. })));
 /// ```
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -332,7 +332,7 @@ impl StepError {
     /// The step index where the error happened (0 for input errors).
     ///
     /// ```
-    /// use shake_runtime::StepError;
+    /// use geoshake_runtime::StepError;
     /// let e = StepError::ComponentJump { step: 7, t: 0.7, det_before: 1.0, det_after: -1.0 };
     /// assert_eq!(e.step(), 7);
     /// ```
@@ -356,7 +356,7 @@ impl StepError {
     /// (`None` for input and storage errors, found before any step).
     ///
     /// ```
-    /// use shake_runtime::StepError;
+    /// use geoshake_runtime::StepError;
     /// let e = StepError::ComponentJump { step: 7, t: 0.7, det_before: 1.0, det_after: -1.0 };
     /// assert_eq!(e.time(), Some(0.7));
     /// ```

@@ -10,7 +10,7 @@ use crate::system::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
 /// [`Unconstrained`](crate::Unconstrained) to integrate it).
 ///
 /// ```
-/// use shake_runtime::{Hamiltonian, examples::HarmonicOscillator};
+/// use geoshake_runtime::{Hamiltonian, examples::HarmonicOscillator};
 /// assert_eq!(HarmonicOscillator.hamiltonian(&[1.0], &[1.0]), 1.0);
 /// ```
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
@@ -45,7 +45,7 @@ impl Hamiltonian for HarmonicOscillator {
 /// g(q) = |q|² − ℓ².
 ///
 /// ```
-/// use shake_runtime::{ConstrainedSystem, examples::Pendulum};
+/// use geoshake_runtime::{ConstrainedSystem, examples::Pendulum};
 /// let sys = Pendulum::default();
 /// let mut g = [0.0];
 /// sys.constraints(&[0.6, -0.8], &[1.0, 0.0], &mut g);
@@ -74,7 +74,7 @@ impl Pendulum {
     /// velocity ω: q = ℓ(sin θ, −cos θ), p = ℓω(cos θ, sin θ).
     ///
     /// ```
-    /// use shake_runtime::examples::Pendulum;
+    /// use geoshake_runtime::examples::Pendulum;
     /// let z = Pendulum::default().state(0.3, 0.5);
     /// assert!((z.q.norm() - 1.0).abs() < 1e-15 && z.q.dot(&z.p).abs() < 1e-15);
     /// ```
@@ -121,7 +121,7 @@ impl ConstrainedSystem for Pendulum {
         ConstraintKind::Holonomic
     }
     fn quadratic_constraints(&self) -> bool {
-        // |q|² − ℓ²: SHAKE's root in closed form (`shake::classical::fixed`).
+        // |q|² − ℓ²: SHAKE's root in closed form (`geoshake::classical::fixed`).
         true
     }
     fn jacobian_pattern(&self) -> &[(usize, usize)] {
@@ -169,7 +169,7 @@ impl ConstrainedSystem for Pendulum {
 /// runtime's linear-flow exponential (no closed form is given here).
 ///
 /// ```
-/// use shake_runtime::{ConstrainedSystem, examples::HopfHarmonic};
+/// use geoshake_runtime::{ConstrainedSystem, examples::HopfHarmonic};
 /// let mut n = [0.0];
 /// HopfHarmonic::unit().nondegeneracy_matrix(&[0.8, 0.0], &[0.0, 0.6], &mut n);
 /// assert!((n[0] - 4.0 * (0.64 - 0.36)).abs() < 1e-15);
@@ -184,7 +184,7 @@ impl HopfHarmonic {
     /// The unit sphere, r² = 1.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::examples::HopfHarmonic::unit().radius2, 1.0);
+    /// assert_eq!(geoshake_runtime::examples::HopfHarmonic::unit().radius2, 1.0);
     /// ```
     pub fn unit() -> Self {
         HopfHarmonic { radius2: 1.0 }

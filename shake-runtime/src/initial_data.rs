@@ -17,7 +17,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Π: moves z ∈ M along its fibre onto M^H (RATTLE's projection).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let z = integ.project(&State::from_slices(&[0.0, -1.0], &[0.3, 0.4])).unwrap();
     /// assert!((z.p[1]).abs() < 1e-15 && (z.p[0] - 0.3).abs() < 1e-15);
@@ -54,7 +54,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// [`Options::constraint_tolerance`](crate::Options::constraint_tolerance), or when N is singular there.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, ConstrainedSystem, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, ConstrainedSystem, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let z = integ.project_to_hidden(&State::from_slices(&[0.7, -0.75], &[1.0, 0.2])).unwrap();
     /// let (mut g, mut gh) = ([0.0], [0.0]);

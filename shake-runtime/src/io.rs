@@ -40,7 +40,7 @@ pub(crate) const DIAG_COLUMNS: [&str; 8] = [
 /// Why a CSV file could not be read as a trajectory. Lines count from 1.
 ///
 /// ```
-/// use shake_runtime::{Trajectory, io::CsvError};
+/// use geoshake_runtime::{Trajectory, io::CsvError};
 /// let bad = "# shake trajectory v1 t0=0 h=0.1 stride=1 m=0\nt,step,q[0],p[0]\n0,0,1.0,zero\n";
 /// assert!(matches!(Trajectory::read_csv(bad.as_bytes()), Err(CsvError::BadNumber { line: 3, .. })));
 /// ```
@@ -98,7 +98,7 @@ impl Trajectory {
     /// Writes the trajectory as CSV (layout in [`io`](crate::io)).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Stop, Trajectory, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Stop, Trajectory, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
     /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(3)).execute().trajectory;
     /// let mut csv = Vec::new();
@@ -150,7 +150,7 @@ impl Trajectory {
     /// carrying the line, never a panic.
     ///
     /// ```
-    /// use shake_runtime::{Trajectory, io::CsvError};
+    /// use geoshake_runtime::{Trajectory, io::CsvError};
     /// let text = "# shake trajectory v1 t0=0 h=0.5 stride=1 m=0\nt,step,q[0],p[0]\n0,0,1,0\n0.5,1,0.9,-0.4\n";
     /// let traj = Trajectory::read_csv(text.as_bytes()).unwrap();
     /// assert_eq!((traj.len(), traj.time(1), traj.p(1)[0]), (2, 0.5, -0.4));

@@ -31,7 +31,7 @@ const FORMAT: &str = "trajectory v1";
 /// count from 0 over the whole file (across record batches).
 ///
 /// ```
-/// use shake_runtime::{Trajectory, io_arrow::ArrowIoError};
+/// use geoshake_runtime::{Trajectory, io_arrow::ArrowIoError};
 /// let not_arrow = std::io::Cursor::new(b"t,step\n0,0\n".to_vec());
 /// assert!(matches!(Trajectory::read_arrow(not_arrow), Err(ArrowIoError::Arrow(_))));
 /// ```
@@ -105,7 +105,7 @@ impl Trajectory {
     /// (layout in [`io_arrow`](crate::io_arrow)).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Stop, Trajectory, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Stop, Trajectory, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
     /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(3)).execute().trajectory;
     /// let mut file = Vec::new();
@@ -186,7 +186,7 @@ impl Trajectory {
     /// [`ArrowIoError`], never a panic.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Stop, Trajectory, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Stop, Trajectory, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(5)).stride(2).execute().trajectory;
     /// let mut file = Vec::new();

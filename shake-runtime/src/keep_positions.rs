@@ -30,7 +30,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// [`project`](Self::project).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, StepError, ConstrainedSystem, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, StepError, ConstrainedSystem, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// // On the rod (an exact Pythagorean point), with a guessed velocity.
     /// let z = integ.project_momenta_to_hidden(&State::from_slices(&[0.6, -0.8], &[1.0, 1.0])).unwrap();

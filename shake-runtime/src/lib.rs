@@ -1,4 +1,4 @@
-//! # shake-runtime
+//! # geoshake-runtime
 //!
 //! The numerical half of shake: the traits a declared system implements
 //! ([`Hamiltonian`], [`ConstrainedSystem`]), base maps, fibre flows, and the
@@ -13,7 +13,7 @@
 //! [`SymplecticEuler`]) and a step size h:
 //!
 //! ```
-//! use shake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
+//! use geoshake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
 //!
 //! let pendulum = Pendulum { gravity: 9.81, length: 1.0 };
 //! let mut rattle = Integrator::new(pendulum, ImplicitMidpoint, 0.01).rattle().with_diagnostics();
@@ -37,7 +37,7 @@
 //!   the X_{g_i} commute, a simplified Newton otherwise), nested with the base
 //!   map's own stage iteration. λ is the fibre parameter itself: for holonomic
 //!   g and Störmer–Verlet, λ = (h/2) λ_classical of Section 5.1.3. (The
-//!   module is private: `shake::shake` would clash with the facade crate.)
+//!   module is private: `geoshake::shake` would clash with the facade crate.)
 //! - [`rattle`]: R_h = Π ∘ S_h, Π the projection along the fibre onto M^H.
 //! - [`fibre`]: the fibre flows exp(Σ λ_i X_{g_i}), exact to round-off.
 //! - [`newton`]: every implicit equation is solved to round-off.

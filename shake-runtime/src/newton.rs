@@ -32,21 +32,31 @@
 //! iterations, each far cheaper. Its stopping rule
 //! (`Monitor::update_frozen`) keeps rule 1, and keeps iterating while the
 //! updates at least quarter (fast linear contraction). Any other update
-//! made with a stale Jacobian asks the caller to refresh the Jacobian at the
-//! current iterate: a slowing contraction and rounding noise cannot be told
-//! apart from the update sizes alone (with a 1e-6 stagnation threshold, a
-//! contraction ratio that drifts from 0.2 to 0.3 near 1e-8 would otherwise
-//! be taken for the noise floor and stop there). Stagnation (rule 2) is
-//! accepted once an update made with a fresh Jacobian has itself been below
-//! the stagnation threshold (the quadratic regime is reached, so a stale
-//! Jacobian is off by O(update) and a non-contracting update is noise):
-//! the result is as close to round-off as plain Newton's, and the noise
-//! floor is recognised without a coin toss on every refresh.
+//! asks the caller for a Jacobian at the current iterate: a slowing
+//! contraction and rounding noise cannot be told apart from the update
+//! sizes alone (with a 1e-6 stagnation threshold, a contraction ratio that
+//! drifts from 0.2 to 0.3 near 1e-8 would otherwise be taken for the noise
+//! floor and stop there), and an update made with a fresh Jacobian that
+//! does not quarter is Newton's own pre-asymptotic phase, where a Jacobian
+//! per iterate is what converges. Stagnation (rule 2) is accepted with a
+//! fresh Jacobian, or once a Jacobian has been evaluated in the quadratic
+//! regime (a fresh update, or an update before a refresh, already below
+//! the stagnation threshold): from there on a stale Jacobian differs from a
+//! fresh one by O(update), and a non-contracting update is noise. The
+//! result is as close to round-off as plain Newton's, and the noise floor
+//! is recognised without a coin toss on every refresh.
+//!
+//! A caller that knows the round-off level of x itself (classical SHAKE:
+//! the floor of g seen through J⁻¹, `Monitor::set_floor`) stops on an
+//! update below it as on rule 1; a caller that moves x by a closed-form
+//! root between updates records it with `Monitor::jump`. Every SHAKE
+//! kernel (the general one and the classical ones, slice and fixed-size)
+//! stops by this one rule.
 
 /// Tolerances and limits of every Newton iteration of a step.
 ///
 /// ```
-/// use shake_runtime::NewtonOptions;
+/// use geoshake_runtime::NewtonOptions;
 /// let opts = NewtonOptions { max_iterations: 30, ..NewtonOptions::default() };
 /// assert_eq!(opts.step_tolerance, 4.0 * f64::EPSILON);
 /// ```
@@ -89,9 +99,11 @@ pub(crate) enum Verdict {
 pub(crate) struct Monitor {
     opts: NewtonOptions,
     prev_step: f64,
-    /// Simplified Newton: an update made with a fresh Jacobian was already
-    /// below the stagnation threshold (Newton's quadratic regime reached).
-    fresh_tiny: bool,
+    /// Simplified Newton: a Jacobian was evaluated in the quadratic regime
+    /// (where the updates were already below the stagnation threshold).
+    jacobian_near: bool,
+    /// The round-off level of x, when the caller knows it (0 otherwise).
+    floor: f64,
     pub(crate) iterations: usize,
 }
 
@@ -100,9 +112,24 @@ impl Monitor {
         Monitor {
             opts,
             prev_step: f64::INFINITY,
-            fresh_tiny: false,
+            jacobian_near: false,
+            floor: 0.0,
             iterations: 0,
         }
+    }
+
+    /// An update no larger than `floor` is at round-off (rule 1): the
+    /// caller's estimate of the rounding level of x.
+    pub(crate) fn set_floor(&mut self, floor: f64) {
+        self.floor = floor;
+    }
+
+    /// The caller moved x by `step` to a closed-form root instead of an
+    /// update of this iteration: it counts as an iteration and as the
+    /// previous update, and the next update is judged against it.
+    pub(crate) fn jump(&mut self, step: f64) {
+        self.iterations += 1;
+        self.prev_step = step;
     }
 
     /// Called after each update with ‖Δx‖ and the updated ‖x‖ (∞-norms).
@@ -121,28 +148,28 @@ impl Monitor {
 
     /// [`update`](Self::update) for simplified Newton: `fresh` says whether
     /// the Jacobian that gave this update was evaluated at the iterate it
-    /// was applied to. See the module docs.
+    /// was applied to. [`Verdict::Refresh`] asks for a Jacobian at the
+    /// current iterate. See the module docs.
     pub(crate) fn update_frozen(&mut self, step: f64, x: f64, fresh: bool) -> Verdict {
         self.iterations += 1;
         let prev = self.prev_step;
         self.prev_step = step;
-        if step <= self.opts.step_tolerance * x {
+        if step <= (self.opts.step_tolerance * x).max(self.floor) {
             return Verdict::Converged;
         }
         let tiny = step <= self.opts.stagnation_threshold * x.max(1.0);
-        self.fresh_tiny |= fresh && tiny;
+        self.jacobian_near |= fresh && tiny;
+        // Rule 2, trusted once a Jacobian from the quadratic regime is in
+        // use: a non-contracting update is then noise.
+        if step > 0.5 * prev && tiny && (fresh || self.jacobian_near) {
+            return Verdict::Converged;
+        }
         if step <= 0.25 * prev {
             return Verdict::Continue;
         }
-        // Rule 2, trusted once a fresh Jacobian has brought the updates
-        // below the threshold: from there on a stale one differs from a
-        // fresh one by O(update), and a non-contracting update is noise.
-        if step > 0.5 * prev && tiny && (fresh || self.fresh_tiny) {
-            return Verdict::Converged;
-        }
-        if fresh {
-            return Verdict::Continue;
-        }
+        // The Jacobian the caller evaluates now is at an iterate whose
+        // update was already tiny: it is from the quadratic regime.
+        self.jacobian_near |= tiny;
         Verdict::Refresh
     }
 
@@ -192,8 +219,9 @@ mod tests {
         assert_eq!(mon.update_frozen(0.5e-7, 1.0, true), Verdict::Continue);
         // Tiny and barely shrinking, but the Jacobian is stale: refresh.
         assert_eq!(mon.update_frozen(0.2e-7, 1.0, false), Verdict::Refresh);
-        // With a fresh Jacobian, the plain rule.
-        assert_eq!(mon.update_frozen(0.7e-3, 1.0, true), Verdict::Continue);
+        // A fresh Jacobian whose update does not quarter: Newton's own
+        // pre-asymptotic phase, a Jacobian per iterate.
+        assert_eq!(mon.update_frozen(0.7e-3, 1.0, true), Verdict::Refresh);
         assert_eq!(mon.update_frozen(0.6e-7, 1.0, true), Verdict::Continue);
         assert_eq!(mon.update_frozen(0.5e-7, 1.0, true), Verdict::Converged);
         // Rule 1 holds whatever the Jacobian.
@@ -206,6 +234,22 @@ mod tests {
         assert_eq!(mon.update_frozen(1e-8, 1.0, true), Verdict::Continue);
         assert_eq!(mon.update_frozen(1e-14, 1.0, false), Verdict::Continue);
         assert_eq!(mon.update_frozen(0.9e-14, 1.0, false), Verdict::Converged);
+    }
+
+    #[test]
+    fn a_known_floor_is_round_off_and_a_jump_is_the_previous_update() {
+        let mut mon = Monitor::new(NewtonOptions::default());
+        mon.set_floor(1e-12);
+        assert_eq!(mon.update_frozen(1e-3, 1.0, true), Verdict::Continue);
+        // Far above 4ε·‖x‖, but at the caller's round-off level of x.
+        assert_eq!(mon.update_frozen(0.9e-12, 1.0, false), Verdict::Converged);
+
+        let mut mon = Monitor::new(NewtonOptions::default());
+        mon.jump(1e-4);
+        assert_eq!(mon.iterations, 1);
+        // Judged against the jump: it did not quarter, so a Jacobian here.
+        assert_eq!(mon.update_frozen(0.5e-4, 1.0, false), Verdict::Refresh);
+        assert_eq!(mon.iterations, 2);
     }
 
     #[test]

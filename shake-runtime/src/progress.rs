@@ -10,7 +10,7 @@
 //! runs 10⁷ steps with the bar on).
 //!
 //! ```
-//! use shake_runtime::{progress::Progress, Integrator, StormerVerlet, Stop, examples::Pendulum};
+//! use geoshake_runtime::{progress::Progress, Integrator, StormerVerlet, Stop, examples::Pendulum};
 //! let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.01);
 //! let mut progress = Progress::new("pendulum");
 //! let out = integ
@@ -41,7 +41,7 @@ impl Progress {
     /// a terminal).
     ///
     /// ```
-    /// let p = shake_runtime::progress::Progress::new("run");
+    /// let p = geoshake_runtime::progress::Progress::new("run");
     /// assert_eq!(p.bar().message(), "run");
     /// ```
     pub fn new(label: &str) -> Self {
@@ -52,7 +52,7 @@ impl Progress {
     /// when the output is not wanted).
     ///
     /// ```
-    /// assert!(shake_runtime::progress::Progress::hidden("run").bar().is_hidden());
+    /// assert!(geoshake_runtime::progress::Progress::hidden("run").bar().is_hidden());
     /// ```
     pub fn hidden(label: &str) -> Self {
         Self::with_bar(ProgressBar::hidden(), label)

@@ -152,7 +152,7 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
 /// z) times one of H, so rounding z in its last bit changes {g,H} by about
 /// ε times this scale; 1e-12 ≈ 4500ε leaves room for the few thousand
 /// roundings of a projection (the bound `tests/fuzz_api.rs` and
-/// `tests/runtime_proptest.rs` hold every projection to). `grad` is
+/// `tests/suite/runtime_proptest.rs` hold every projection to). `grad` is
 /// scratch of length 2d.
 pub(crate) fn hidden_roundoff<S: ConstrainedSystem>(sys: &S, z: &[f64], grad: &mut [f64]) -> f64 {
     let d = z.len() / 2;
@@ -386,7 +386,7 @@ pub(crate) fn factor_and_check(
 
 /// N read and ready to factorise, wherever it is held: in the workspace
 /// ([`read_n`] copied it into `ws.jac`) or on the stack (the fixed-size
-/// classical step, `shake::classical::fixed_m`). What
+/// classical step, `geoshake::classical::fixed_m`). What
 /// [`Guard::check_n`](crate::guard::Guard::check_n) needs of it.
 pub(crate) trait FactorN {
     /// N's order m.

@@ -7,7 +7,7 @@
 /// What one step did.
 ///
 /// ```
-/// use shake_runtime::{Integrator, ImplicitMidpoint, State, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, ImplicitMidpoint, State, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1);
 /// let mut z = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
 /// let info = integ.step_in_place(&mut z).unwrap();

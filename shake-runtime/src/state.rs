@@ -5,7 +5,7 @@ use nalgebra::DVector;
 /// A phase-space point z = (q, p), with q, p ∈ R^d as nalgebra vectors.
 ///
 /// ```
-/// use shake_runtime::State;
+/// use geoshake_runtime::State;
 /// let z = State::from_slices(&[1.0, 0.0], &[0.0, 0.5]);
 /// assert_eq!(z.dof(), 2);
 /// assert_eq!(z.p[1], 0.5);
@@ -22,7 +22,7 @@ pub struct State {
 /// q and p of the same length d.
 ///
 /// ```
-/// use shake_runtime::{State, StateError};
+/// use geoshake_runtime::{State, StateError};
 /// let e = State::try_from_slices(&[1.0], &[1.0, 2.0]).unwrap_err();
 /// assert_eq!(e, StateError::LengthMismatch { q: 1, p: 2 });
 /// assert_eq!(e.to_string(), "q has 1 entries and p has 2: a state needs both of length d");
@@ -55,7 +55,7 @@ impl State {
     /// [`try_new`](Self::try_new), which returns a [`StateError`].
     ///
     /// ```
-    /// use shake_runtime::{State, nalgebra::DVector};
+    /// use geoshake_runtime::{State, nalgebra::DVector};
     /// let z = State::new(DVector::from_vec(vec![1.0]), DVector::from_vec(vec![2.0]));
     /// assert_eq!(z.q[0], 1.0);
     /// ```
@@ -68,7 +68,7 @@ impl State {
     /// are [`StateError::LengthMismatch`].
     ///
     /// ```
-    /// use shake_runtime::{State, StateError, nalgebra::DVector};
+    /// use geoshake_runtime::{State, StateError, nalgebra::DVector};
     /// let q = DVector::from_vec(vec![1.0]);
     /// let z = State::try_new(q.clone(), DVector::from_vec(vec![2.0])).unwrap();
     /// assert_eq!(z.p[0], 2.0);
@@ -93,7 +93,7 @@ impl State {
     /// data use [`try_from_slices`](Self::try_from_slices).
     ///
     /// ```
-    /// let z = shake_runtime::State::from_slices(&[0.0, -1.0], &[1.0, 0.0]);
+    /// let z = geoshake_runtime::State::from_slices(&[0.0, -1.0], &[1.0, 0.0]);
     /// assert_eq!(z.q[1], -1.0);
     /// ```
     pub fn from_slices(q: &[f64], p: &[f64]) -> Self {
@@ -105,7 +105,7 @@ impl State {
     /// before anything is copied).
     ///
     /// ```
-    /// use shake_runtime::{State, StateError};
+    /// use geoshake_runtime::{State, StateError};
     /// let z = State::try_from_slices(&[0.0, -1.0], &[1.0, 0.0]).unwrap();
     /// assert_eq!(z.q[1], -1.0);
     /// assert_eq!(
@@ -126,7 +126,7 @@ impl State {
     /// The origin of R^{2d}.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::State::zeros(3).q.len(), 3);
+    /// assert_eq!(geoshake_runtime::State::zeros(3).q.len(), 3);
     /// ```
     pub fn zeros(d: usize) -> Self {
         State {
@@ -138,7 +138,7 @@ impl State {
     /// The number d of degrees of freedom.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::State::zeros(2).dof(), 2);
+    /// assert_eq!(geoshake_runtime::State::zeros(2).dof(), 2);
     /// ```
     pub fn dof(&self) -> usize {
         self.q.len()
@@ -147,7 +147,7 @@ impl State {
     /// z = (q, p) as one vector of length 2d.
     ///
     /// ```
-    /// let z = shake_runtime::State::from_slices(&[1.0], &[2.0]).to_vector();
+    /// let z = geoshake_runtime::State::from_slices(&[1.0], &[2.0]).to_vector();
     /// assert_eq!(z.as_slice(), &[1.0, 2.0]);
     /// ```
     pub fn to_vector(&self) -> DVector<f64> {
@@ -163,7 +163,7 @@ impl State {
     /// [`try_from_vector`](Self::try_from_vector).
     ///
     /// ```
-    /// use shake_runtime::{State, nalgebra::DVector};
+    /// use geoshake_runtime::{State, nalgebra::DVector};
     /// let z = State::from_vector(&DVector::from_vec(vec![1.0, 2.0]));
     /// assert_eq!((z.q[0], z.p[0]), (1.0, 2.0));
     /// ```
@@ -177,7 +177,7 @@ impl State {
     /// is [`StateError::OddLength`].
     ///
     /// ```
-    /// use shake_runtime::{State, StateError, nalgebra::DVector};
+    /// use geoshake_runtime::{State, StateError, nalgebra::DVector};
     /// let z = State::try_from_vector(&DVector::from_vec(vec![1.0, 2.0])).unwrap();
     /// assert_eq!((z.q[0], z.p[0]), (1.0, 2.0));
     /// let odd = DVector::from_vec(vec![1.0, 2.0, 3.0]);
@@ -193,7 +193,7 @@ impl State {
     /// True when every entry is finite.
     ///
     /// ```
-    /// assert!(!shake_runtime::State::from_slices(&[f64::NAN], &[0.0]).is_finite());
+    /// assert!(!geoshake_runtime::State::from_slices(&[f64::NAN], &[0.0]).is_finite());
     /// ```
     pub fn is_finite(&self) -> bool {
         self.q.iter().chain(self.p.iter()).all(|x| x.is_finite())
@@ -202,7 +202,7 @@ impl State {
     /// max(‖q − q'‖∞, ‖p − p'‖∞).
     ///
     /// ```
-    /// use shake_runtime::State;
+    /// use geoshake_runtime::State;
     /// let a = State::from_slices(&[1.0], &[0.0]);
     /// let b = State::from_slices(&[1.0], &[1e-3]);
     /// assert_eq!(a.distance(&b), 1e-3);

@@ -106,7 +106,7 @@ pub trait Hamiltonian {
     /// The default numbers them `q[k]` and `p[k−d]`.
     ///
     /// ```
-    /// use shake_runtime::{Hamiltonian, examples::Pendulum};
+    /// use geoshake_runtime::{Hamiltonian, examples::Pendulum};
     /// let pendulum = Pendulum::default();
     /// assert_eq!(pendulum.variable_name(0), "q[0]");
     /// assert_eq!(pendulum.variable_name(3), "p[1]");
@@ -191,7 +191,7 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// provide them or `values` does not have the pattern's length; the
     /// runtime then reads them out of `constraint_jacobian`.
     /// `constrained_system!` and the run-time declarations
-    /// (`shake::declared`) provide them. They
+    /// (`geoshake::declared`) provide them. They
     /// matter for long chains: the nonzeros of the dense m × 2d g_z lie a
     /// column (8m bytes) apart, so writing and reading them touches a
     /// cache line each, in buffers that outgrow the caches from a few
@@ -243,7 +243,7 @@ pub trait ConstrainedSystem: Hamiltonian {
     /// the wrapper's): it may offer its own sizes, `v.fixed::<D, M>(self)`.
     ///
     /// ```
-    /// use shake_runtime::{ConstrainedSystem, SizeVisitor, examples::Pendulum};
+    /// use geoshake_runtime::{ConstrainedSystem, SizeVisitor, examples::Pendulum};
     /// struct Sizes;
     /// impl<S> SizeVisitor<S> for Sizes {
     ///     type Output = Option<(usize, usize)>;

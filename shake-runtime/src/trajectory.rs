@@ -23,7 +23,7 @@ use std::sync::Arc;
 /// on.
 ///
 /// ```
-/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
 /// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
 /// let traj = integ.run(z0, Stop::Steps(4)).execute().trajectory;
@@ -186,7 +186,7 @@ impl Trajectory {
     /// not made by a run (a default, or a file written without names).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(1)).execute().trajectory;
     /// assert_eq!(traj.variable_name(1), "q[1]");
@@ -203,7 +203,7 @@ impl Trajectory {
     /// trajectory was not made by a run).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
     /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(1)).execute().trajectory;
     /// assert_eq!(traj.constraint_name(0), "rod");
@@ -224,7 +224,7 @@ impl Trajectory {
     /// diagnostic record (0 when the run had no diagnostics).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Stop, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
     /// let traj = i.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(2)).execute().trajectory;
     /// assert_eq!(traj.constraints(), 1);
@@ -295,7 +295,7 @@ impl Trajectory {
     /// NaN, never a made-up number.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).with_diagnostics();
     /// // At rest at the bottom the rod pulls up: λ > 0 (p ← p − 2λq, q = (0, −1)).
     /// let traj = i.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(3)).execute().trajectory;
@@ -315,7 +315,7 @@ impl Trajectory {
     /// p ← p − (h/2)(H_q + g_qᵀ μ_c) at the new q, so σ = (h/2) μ_c.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).with_diagnostics();
     /// let traj = i.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(3)).execute().trajectory;
     /// assert!(traj.sigma(1)[0] > 0.0);
@@ -334,7 +334,7 @@ impl Trajectory {
     /// (for SHAKE σ = 0 and λ is all of it). Each half alone is off the
     /// exact multiplier by O(h), with opposite signs; the symmetric sum is
     /// O(h²) for a symmetric second-order base map (Störmer–Verlet,
-    /// implicit midpoint): `tests/constraint_forces.rs` shows the error
+    /// implicit midpoint): `tests/suite/constraint_forces.rs` shows the error
     /// ratio 4 when h is halved on the pendulum. g_q is evaluated with the
     /// system's `constraint_jacobian` at the stored state (for constraints
     /// that depend on p, −g_qᵀλ_c is the force on p and g_pᵀλ_c the
@@ -344,7 +344,7 @@ impl Trajectory {
     /// last, where no step leaves (λ is NaN).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let pendulum = Pendulum { gravity: 9.81, length: 1.0 };
     /// let mut i = Integrator::new(pendulum, StormerVerlet, 1e-3).with_diagnostics();
     /// // At rest at the bottom: the tension is m g = 9.81, pointing up.
@@ -405,7 +405,7 @@ impl Trajectory {
     /// Number of stored states.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::Trajectory::default().len(), 0);
+    /// assert_eq!(geoshake_runtime::Trajectory::default().len(), 0);
     /// ```
     pub fn len(&self) -> usize {
         self.regular + usize::from(self.extra.is_some())
@@ -414,7 +414,7 @@ impl Trajectory {
     /// True when nothing was stored.
     ///
     /// ```
-    /// assert!(shake_runtime::Trajectory::default().is_empty());
+    /// assert!(geoshake_runtime::Trajectory::default().is_empty());
     /// ```
     pub fn is_empty(&self) -> bool {
         self.len() == 0
@@ -423,7 +423,7 @@ impl Trajectory {
     /// The step index of state `i` (panics when `i ≥ len()`).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
     /// let traj = integ.run(z0, Stop::Steps(7)).stride(3).execute().trajectory;
@@ -441,7 +441,7 @@ impl Trajectory {
     /// The step indices of all stored states.
     ///
     /// ```
-    /// assert!(shake_runtime::Trajectory::default().steps().is_empty());
+    /// assert!(geoshake_runtime::Trajectory::default().steps().is_empty());
     /// ```
     pub fn steps(&self) -> Vec<u64> {
         (0..self.len()).map(|i| self.step(i)).collect()
@@ -450,7 +450,7 @@ impl Trajectory {
     /// The time t0 + k h of state `i`, k its step index.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.5);
     /// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
     /// let traj = integ.run(z0, Stop::Steps(2)).start_time(1.0).execute().trajectory;
@@ -463,7 +463,7 @@ impl Trajectory {
     /// The times of all stored states.
     ///
     /// ```
-    /// assert!(shake_runtime::Trajectory::default().times().is_empty());
+    /// assert!(geoshake_runtime::Trajectory::default().times().is_empty());
     /// ```
     pub fn times(&self) -> Vec<f64> {
         (0..self.len()).map(|i| self.time(i)).collect()
@@ -472,7 +472,7 @@ impl Trajectory {
     /// The positions q of state `i`, a view into the buffer.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let traj = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(1)).execute().trajectory;
     /// assert_eq!(traj.q(0), &[0.0, -1.0]);
@@ -486,7 +486,7 @@ impl Trajectory {
     /// The momenta p of state `i`, a view into the buffer.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let traj = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(1)).execute().trajectory;
     /// assert_eq!(traj.p(0), &[0.5, 0.0]);
@@ -500,7 +500,7 @@ impl Trajectory {
     /// State `i` as an owned [`State`] (a copy).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
     /// let traj = integ.run(z0.clone(), Stop::Steps(1)).execute().trajectory;
@@ -513,7 +513,7 @@ impl Trajectory {
     /// The last stored state (a copy).
     ///
     /// ```
-    /// assert!(shake_runtime::Trajectory::default().last().is_none());
+    /// assert!(geoshake_runtime::Trajectory::default().last().is_none());
     /// ```
     pub fn last(&self) -> Option<State> {
         self.len().checked_sub(1).map(|i| self.state(i))
@@ -522,7 +522,7 @@ impl Trajectory {
     /// Every stored state in order (copies).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let traj = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(3)).execute().trajectory;
     /// assert_eq!(traj.states().count(), 4);
@@ -535,7 +535,7 @@ impl Trajectory {
     /// indices and times take none).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let traj = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(9)).execute().trajectory;
     /// assert_eq!(traj.state_bytes(), 10 * 32);

@@ -7,8 +7,8 @@ use crate::system::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 /// SHAKE and RATTLE then reduce to the base map φ_h.
 ///
 /// ```
-/// use shake_runtime::{Integrator, StormerVerlet, Unconstrained, State, Stop};
-/// use shake_runtime::examples::HarmonicOscillator;
+/// use geoshake_runtime::{Integrator, StormerVerlet, Unconstrained, State, Stop};
+/// use geoshake_runtime::examples::HarmonicOscillator;
 /// let mut integ = Integrator::new(Unconstrained(HarmonicOscillator), StormerVerlet, 0.01);
 /// let out = integ.run(State::from_slices(&[1.0], &[0.0]), Stop::Time(std::f64::consts::PI)).execute();
 /// let last = out.trajectory.last().unwrap();

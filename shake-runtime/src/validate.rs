@@ -23,7 +23,7 @@
 //!   anywhere in it is an error at that step, never an `Ok`.
 //!
 //! ```
-//! use shake_runtime::{Integrator, Options, StormerVerlet, State, StepError, examples::Pendulum};
+//! use geoshake_runtime::{Integrator, Options, StormerVerlet, State, StepError, examples::Pendulum};
 //! let bad = Options { constraint_tolerance: f64::NAN, ..Options::default() };
 //! let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_options(bad);
 //! let z0 = State::from_slices(&[0.0, -1.0], &[1.0, 0.0]);

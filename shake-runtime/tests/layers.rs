@@ -18,7 +18,7 @@
 //! `tests.rs`, `mod x;` declarations, visibilities (`pub(super)`) and doc
 //! comments are not imports.
 //!
-//! `cargo test --release -p shake-runtime --test layers -- --nocapture`
+//! `cargo test --release -p geoshake-runtime --test layers -- --nocapture`
 //! prints the files, the edges and the violations by layer pair.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -364,12 +364,12 @@ impl Crate {
             });
         }
         for u in module.uses.iter().filter(|u| u.glob) {
-            if let (Res::Module(g), true) = self.resolve_in(m, &u.path, stack) {
-                if g != m {
-                    let (r, found) = self.walk(&g, rest, stack);
-                    if found {
-                        return Some((r, true));
-                    }
+            if let (Res::Module(g), true) = self.resolve_in(m, &u.path, stack)
+                && g != m
+            {
+                let (r, found) = self.walk(&g, rest, stack);
+                if found {
+                    return Some((r, true));
                 }
             }
         }
@@ -968,7 +968,7 @@ fn layers() {
     assert!(
         fail.is_empty(),
         "the layering of docs/engine.md is broken:\n{}\n(SHAKE_LAYERS_EDGES=1 cargo test --release \
-         -p shake-runtime --test layers -- --nocapture lists every import)",
+         -p geoshake-runtime --test layers -- --nocapture lists every import)",
         fail.join("\n")
     );
 }

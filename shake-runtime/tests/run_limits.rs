@@ -6,12 +6,12 @@
 //! particle path's tolerance and iteration budget, and the fallible
 //! constructors of a dense `State`.
 
-use shake_runtime::nalgebra::DVector;
-use shake_runtime::particles::{
+use geoshake_runtime::nalgebra::DVector;
+use geoshake_runtime::particles::{
     stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle, Table,
 };
-use shake_runtime::validate::{MAX_ITERATIONS, MAX_STEPS, MIN_RELATIVE_TOLERANCE};
-use shake_runtime::{
+use geoshake_runtime::validate::{MAX_ITERATIONS, MAX_STEPS, MIN_RELATIVE_TOLERANCE};
+use geoshake_runtime::{
     examples::Pendulum, Integrator, State, StateError, StepError, Stop, StormerVerlet,
 };
 
@@ -147,7 +147,7 @@ fn dimer_state(moving: bool) -> ParticleState {
 
 /// The run was refused before any step: `InvalidInput` with this message
 /// fragment, nothing stored, no step taken.
-fn refused(out: shake_runtime::particles::RunOutcome, state: &ParticleState, what: &str) -> f64 {
+fn refused(out: geoshake_runtime::particles::RunOutcome, state: &ParticleState, what: &str) -> f64 {
     assert!(
         out.trajectory.is_empty(),
         "stored {} states",

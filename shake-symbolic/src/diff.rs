@@ -153,7 +153,7 @@ impl Graph {
     }
 }
 
-/// How the constraints depend on z (mirrors `shake_runtime::ConstraintKind`).
+/// How the constraints depend on z (mirrors `geoshake_runtime::ConstraintKind`).
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum Kind {
     None,

@@ -4,7 +4,7 @@
 //! user's spans), `lower` (the hash-consed expression graph of `symbolic`,
 //! kept canonical by `simplify`), `diff` (every derivative SHAKE and RATTLE
 //! need), and `check` (the paper's assumptions: coisotropy and
-//! nondegeneracy, Sections 3.2 and 5.2). The proc macro (`shake-macros`)
+//! nondegeneracy, Sections 3.2 and 5.2). The proc macro (`geoshake-macros`)
 //! turns the result into Rust code; a run-time path ([`declare`]) reads the
 //! same grammar from a string and evaluates the same graph.
 //!
@@ -15,10 +15,10 @@
 //!     hamiltonian = (p[0]^2 + p[1]^2) / 2 + gravity * q[1];
 //!     constraints { rod: q[0]^2 + q[1]^2 - length^2 }
 //! }";
-//! let sys = shake_symbolic::declare(src).unwrap();
+//! let sys = geoshake_symbolic::declare(src).unwrap();
 //! assert_eq!((sys.dof(), sys.constraint_count()), (2, 1));
 //! let typo = src.replace("gravity * q[1]", "gravty * q[1]");
-//! let Err(bad) = shake_symbolic::declare(&typo) else { panic!("accepted") };
+//! let Err(bad) = geoshake_symbolic::declare(&typo) else { panic!("accepted") };
 //! assert_eq!((bad.line, bad.column), (4, 43));
 //! assert!(bad.message.contains("gravity"), "{}", bad.message);
 //! ```

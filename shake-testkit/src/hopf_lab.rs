@@ -1,14 +1,14 @@
 //! The computations behind the two Hopf scenes (the paper's Section 5.4) and
 //! their tests: runs of shake's SHAKE and RATTLE on
-//! `shake::models::{HopfFree, HopfGravity}`, measured against the independent
+//! `geoshake::models::{HopfFree, HopfGravity}`, measured against the independent
 //! reference of [`crate::reference`].
 //!
 //! Nothing here draws or keeps the claims table: the `paper` scenes
-//! (`hopf_free.rs`, `hopf_gravity.rs`) and `tests/paper_hopf.rs` both use
+//! (`hopf_free.rs`, `hopf_gravity.rs`) and `tests/suite/paper_hopf.rs` both use
 //! this module, so the figure, the claims table and the tests measure the same
 //! quantities against the same bounds.
 //!
-//! Conventions (those of shake_runtime::system): z = (q₀, q₁, p₀, p₁), X_F = (F_p, −F_q),
+//! Conventions (those of geoshake_runtime::system): z = (q₀, q₁, p₀, p₁), X_F = (F_p, −F_q),
 //! {F,G} = F_q·G_p − F_p·G_q, q' = H_p + g_pᵀλ, p' = −H_q − g_qᵀλ. With
 //! g = |q|² + |p|² − r², X_g = (2p, −2q), so the fibre flow exp(σX_g) is the
 //! rotation z_k ↦ e^{−2iσ} z_k of z_k = q_k + i p_k, and the paper's multiplier
@@ -17,9 +17,11 @@
 
 use std::f64::consts::PI;
 
+use geoshake::models::{HopfFree, HopfGravity};
+use geoshake::{
+    ImplicitMidpoint, Integrator, Method, Options, State, StepError, Stop, Unconstrained,
+};
 use nalgebra::DVector;
-use shake::models::{HopfFree, HopfGravity};
-use shake::{ImplicitMidpoint, Integrator, Method, Options, State, StepError, Stop, Unconstrained};
 
 use crate::reference as r;
 

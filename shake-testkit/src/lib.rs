@@ -3,12 +3,12 @@
 //!
 //! - [`models`]: hand-written systems (pendulum, spherical and double
 //!   pendulum, the Hopf constraint, degenerate and index-five cases), with
-//!   derivatives checked against finite differences in `tests/runtime_models.rs`;
+//!   derivatives checked against finite differences in `tests/suite/runtime_models.rs`;
 //! - [`reference`](mod@reference): an integrator and exact solutions independent of the
 //!   runtime (dual-number derivatives, high-order collocation, closed forms);
 //! - [`alloc`]: a counting global allocator for the no-allocation tests;
 //! - [`hopf_lab`]: the computations behind the Section 5.4 scenes and
-//!   `tests/paper_hopf.rs`;
+//!   `tests/suite/paper_hopf.rs`;
 //! - [`plot`]: the figure helpers of `examples/paper` and
 //!   `examples/work_precision.rs`;
 //! - [`bench`](mod@bench): chains, dual-number baselines, the hand-written limit and the

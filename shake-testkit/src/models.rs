@@ -4,15 +4,15 @@
 //!
 //! Each is straight-line code without allocation that writes only the
 //! structurally nonzero entries of its outputs (the contract of
-//! `shake_runtime::system`: column-major, q-columns first). Their
+//! `geoshake_runtime::system`: column-major, q-columns first). Their
 //! derivatives are checked against finite differences in
-//! `tests/runtime_models.rs`.
+//! `tests/suite/runtime_models.rs`.
 //!
 //! Conventions (MISSION.md): X_F = (F_p, −F_q), {F,G} = F_q·G_p − F_p·G_q,
 //! hidden constraints {g_i, H}, N_ij = {{H,g_i},g_j}.
 #![allow(dead_code)]
 
-use shake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
+use geoshake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
 
 // ---------------------------------------------------------------------------
 // Pendulum (Example 1.3)
@@ -23,7 +23,7 @@ use shake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian};
 /// and benchmarks use the same one.
 // Not every test crate that includes `common` uses every model.
 #[allow(unused_imports)]
-pub use shake::runtime::examples::Pendulum;
+pub use geoshake::runtime::examples::Pendulum;
 
 // ---------------------------------------------------------------------------
 // Pendulum with a position-dependent mass (non-separable H)
@@ -48,8 +48,8 @@ impl Default for NonSeparablePendulum {
 
 impl NonSeparablePendulum {
     /// q = (sin θ, −cos θ), p = ω(cos θ, sin θ): q·p = 0, a point of M^H.
-    pub fn state_on_mh(&self, theta: f64, omega: f64) -> shake::State {
-        shake::State::from_slices(
+    pub fn state_on_mh(&self, theta: f64, omega: f64) -> geoshake::State {
+        geoshake::State::from_slices(
             &[theta.sin(), -theta.cos()],
             &[omega * theta.cos(), omega * theta.sin()],
         )
@@ -163,10 +163,10 @@ impl Default for SphericalPendulum {
 
 impl SphericalPendulum {
     /// q = ℓ(sin θ cos φ, sin θ sin φ, −cos θ), p = θ' ∂q/∂θ + φ' ∂q/∂φ: on M^H.
-    pub fn state(&self, theta: f64, phi: f64, theta_dot: f64, phi_dot: f64) -> shake::State {
+    pub fn state(&self, theta: f64, phi: f64, theta_dot: f64, phi_dot: f64) -> geoshake::State {
         let l = self.length;
         let (st, ct, sp, cp) = (theta.sin(), theta.cos(), phi.sin(), phi.cos());
-        shake::State::from_slices(
+        geoshake::State::from_slices(
             &[l * st * cp, l * st * sp, -l * ct],
             &[
                 theta_dot * l * ct * cp - phi_dot * l * st * sp,
@@ -286,12 +286,12 @@ impl Default for DoublePendulum {
 impl DoublePendulum {
     /// The point of M^H at link angles θ₁, θ₂ (from the downward vertical)
     /// with angular velocities ω₁, ω₂.
-    pub fn state(&self, th1: f64, th2: f64, w1: f64, w2: f64) -> shake::State {
+    pub fn state(&self, th1: f64, th2: f64, w1: f64, w2: f64) -> geoshake::State {
         let (x1, y1) = (self.l1 * th1.sin(), -self.l1 * th1.cos());
         let (x2, y2) = (x1 + self.l2 * th2.sin(), y1 - self.l2 * th2.cos());
         let (u1, v1) = (self.l1 * w1 * th1.cos(), self.l1 * w1 * th1.sin());
         let (u2, v2) = (u1 + self.l2 * w2 * th2.cos(), v1 + self.l2 * w2 * th2.sin());
-        shake::State::from_slices(
+        geoshake::State::from_slices(
             &[x1, y1, x2, y2],
             &[self.m1 * u1, self.m1 * v1, self.m2 * u2, self.m2 * v2],
         )

@@ -2,7 +2,7 @@
 //! paper scenes.
 //!
 //! Project rule: accuracy claims are checked against something independent.
-//! Nothing in this module uses `shake-runtime` or `shake-macros`: it is plain
+//! Nothing in this module uses `geoshake-runtime` or `geoshake-macros`: it is plain
 //! Rust, `nalgebra` and `num-dual`. All derivatives are computed by forward-mode
 //! automatic differentiation (`num-dual`) of the *same* H and g written once,
 //! generically over the scalar type, so no code is shared with the macro's
@@ -1431,9 +1431,9 @@ pub fn pendulum_reference(gravity: f64, length: f64, theta: f64, omega: f64, t: 
 
 /// The pendulum state (q, p) at angle θ from the downward vertical and
 /// angular velocity ω (unit mass).
-pub fn pendulum_state(length: f64, theta: f64, omega: f64) -> shake::State {
+pub fn pendulum_state(length: f64, theta: f64, omega: f64) -> geoshake::State {
     let (s, c) = theta.sin_cos();
-    shake::State::from_slices(
+    geoshake::State::from_slices(
         &[length * s, -length * c],
         &[length * omega * c, length * omega * s],
     )

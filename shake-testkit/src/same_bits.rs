@@ -1,7 +1,7 @@
 //! Bit-for-bit equality of two trajectories, for the file round trips
-//! (tests/trajectory_csv.rs, tests/trajectory_arrow.rs).
+//! (tests/suite/trajectory_csv.rs, tests/trajectory_arrow.rs).
 
-use shake::Trajectory;
+use geoshake::Trajectory;
 
 /// Bit-for-bit equality of everything a trajectory exposes (NaN equals
 /// NaN of the same bits; 0.0 and -0.0 differ).

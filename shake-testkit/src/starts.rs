@@ -1,11 +1,11 @@
 //! Moving states on M for the tests that compare two ways of taking the
-//! same steps (`tests/fast_paths.rs`, `tests/run_lane.rs`): generic
+//! same steps (`tests/suite/fast_paths.rs`, `tests/suite/run_lane.rs`): generic
 //! enough that no coordinate or velocity is zero by symmetry.
 
-use shake::State;
+use geoshake::State;
 
 /// On the rods of lengths 1 and 0.7 of the double pendulum
-/// (`shake::models::DoublePendulum`), moving.
+/// (`geoshake::models::DoublePendulum`), moving.
 pub fn double_pendulum() -> State {
     let (t1, t2) = (0.7f64, -0.4f64);
     let (x1, y1) = (t1.sin(), -t1.cos());

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A parameter's default is a number literal: a name (or an expression) is
 // refused at it, not evaluated.

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // 1000 nested parentheses: a spanned error past the parser's nesting limit, not a stack overflow of rustc.
 constrained_system! {

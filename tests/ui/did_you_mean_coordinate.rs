@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A misspelt named coordinate: the error names the nearest declared one.
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A misspelt function: the error names the nearest supported one.
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A misspelt parameter: the error names the nearest declared one.
 constrained_system! {

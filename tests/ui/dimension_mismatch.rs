@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 constrained_system! {
     pub struct Mismatch {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // `**` (Python, Fortran) for a power: the error says `^` is the operator.
 constrained_system! {

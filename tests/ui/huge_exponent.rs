@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // Exponents beyond the documented limit are refused, never an integer overflow.
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A chain of 10^4 powers (`^` is right-associative, so each is a level of nesting).
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // 10^4 unary minus signs: each is a level of nesting of the parser.
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // Each exponent is allowed, their merge x^1000 * x^1000 = x^2000 is not.
 constrained_system! {

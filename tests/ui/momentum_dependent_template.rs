@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A run-time family must be holonomic: this template uses momenta.
 constrained_system! {

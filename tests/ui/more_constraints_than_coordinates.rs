@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // 2000 constraints on 8 coordinates can never have an invertible N: refused
 // at once, before anything is differentiated (this used to take minutes).

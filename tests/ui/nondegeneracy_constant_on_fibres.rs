@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // The paper's Section 5.2 with H = p²/2: H is constant on the fibres,
 // M^H = M and the solutions are not unique.

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // The paper's Section 5.2: g = q̄, H = p²/2 + p̄ q. N ≡ 0, index 5.
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // N = g_q H_pp g_qᵀ = [[1, 1], [1, 1]] has no zero row but is singular on
 // all of M^H.

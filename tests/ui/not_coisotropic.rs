@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // {a, b} = 1 and {c, d} = -1 - 4 q[1] p[1]: neither vanishes on M; both are reported.
 // (Four constraints need d >= 4: with m > d the macro refuses before any pair check.)

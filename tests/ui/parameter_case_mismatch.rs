@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // Parameters may be capitalised, and case counts: `L` declared, `l` used is
 // an unknown symbol, with the declared spelling suggested. The constant `L`

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // Defaults for some parameters only: `impl Default` needs all of them, so
 // the first without one is named (rather than `Default` silently missing).

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // A 24-link planar arm with joint angles q[k], the direction (C_k, S_k) of
 // link k by the rotation recurrence (a DAG: each step uses the previous pair
@@ -38,7 +38,7 @@ constrained_system! {
 }
 
 fn main() {
-    use shake::ConstrainedSystem;
+    use geoshake::ConstrainedSystem;
     let arm = Arm::new(1.0, 9.81, 3.0);
     // Straight along x: the tip is at x = 24, g = 24 - 3.
     let mut g = [0.0];

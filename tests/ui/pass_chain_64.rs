@@ -1,5 +1,5 @@
 //! A chain of 64 links anchored at the origin: d = 128, m = 64.
-use shake::{constrained_system, ConstrainedSystem, Hamiltonian};
+use geoshake::{constrained_system, ConstrainedSystem, Hamiltonian};
 
 constrained_system! {
     pub struct Chain64 {

@@ -1,5 +1,5 @@
 //! {a, b} = q[0] = a: not identically zero, but zero on M. Accepted.
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 constrained_system! {
     pub struct OnM {

@@ -1,5 +1,5 @@
 //! The paper's systems, each in a few lines.
-use shake::{constrained_system, ConstrainedSystem, ConstraintKind};
+use geoshake::{constrained_system, ConstrainedSystem, ConstraintKind};
 
 constrained_system! {
     /// Planar pendulum (Example 1.3).

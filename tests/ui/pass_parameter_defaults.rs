@@ -1,6 +1,6 @@
 //! Defaults for every parameter give `impl Default` (through `new`, so in
 //! declaration order); integers, signs and exponents are read as f64.
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 constrained_system! {
     /// A pendulum in a field that may point up.

@@ -1,5 +1,5 @@
 //! m = 0: a plain Hamiltonian system, with named coordinates and no parameters.
-use shake::{constrained_system, ConstrainedSystem, ConstraintKind, Hamiltonian};
+use geoshake::{constrained_system, ConstrainedSystem, ConstraintKind, Hamiltonian};
 
 constrained_system! {
     /// The Kepler problem.

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // 40 `let`s, each using the one before twice: a DAG of 40 nodes (a tree of 2^40)
 // must expand in time and memory linear in the DAG.
@@ -52,7 +52,7 @@ constrained_system! {
 }
 
 fn main() {
-    use shake::Hamiltonian;
+    use geoshake::Hamiltonian;
     let s = Dag::new();
     // a_k = sin(a_{k-1}) cos(a_{k-1}) at q = (0.3, 0.4), evaluated by hand.
     let mut a: f64 = 0.7;

@@ -1,7 +1,7 @@
 //! A chain with springs (a potential family) and rigid links (a constraint
 //! family), both over run-time tables, with a parameter.
-use shake::constrained_system;
-use shake::runtime::particles::Stencil;
+use geoshake::constrained_system;
+use geoshake::runtime::particles::Stencil;
 
 constrained_system! {
     pub struct SpringChain {

@@ -1,6 +1,6 @@
 //! Rigid water over a run-time table: the declaration does not know n.
-use shake::constrained_system;
-use shake::runtime::particles::Stencil;
+use geoshake::constrained_system;
+use geoshake::runtime::particles::Stencil;
 
 constrained_system! {
     /// Rigid water: three distance constraints per molecule.

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // x[a] - x[b] + x[b] - x[a] cancels: the gradient is identically zero.
 constrained_system! {

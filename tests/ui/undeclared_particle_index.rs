@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // `c` is used as a particle but the table declares only `a` and `b`.
 constrained_system! {

@@ -1,4 +1,4 @@
-use shake::constrained_system;
+use geoshake::constrained_system;
 
 // The table names three particles but the template only moves two.
 constrained_system! {

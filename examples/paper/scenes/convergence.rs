@@ -12,12 +12,12 @@
 //! so their error is O(h) — but Π∘S_hᵏ = Π∘R_hᵏ, so SHAKE projected once at
 //! the end has RATTLE's order.
 
-use nalgebra::DVector;
-use shake::models::{HopfGravity, Pendulum};
-use shake::{
+use geoshake::models::{HopfGravity, Pendulum};
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, Options, State, Stop, StormerVerlet,
     SymplecticEuler,
 };
+use nalgebra::DVector;
 
 use super::util::{observed_order, state_of, z_of};
 use crate::claims::{Bound, Claims};

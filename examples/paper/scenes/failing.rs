@@ -12,8 +12,8 @@
 
 use std::fmt::Display;
 
-use shake::models::HopfFree;
-use shake::{ConstrainedSystem, ImplicitMidpoint, Integrator, State, StepError, Stop};
+use geoshake::models::HopfFree;
+use geoshake::{ConstrainedSystem, ImplicitMidpoint, Integrator, State, StepError, Stop};
 
 use crate::claims::{Bound, Claims};
 use crate::models as m;

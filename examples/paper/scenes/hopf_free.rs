@@ -37,7 +37,7 @@
 
 use std::f64::consts::PI;
 
-pub(super) use shake_testkit::hopf_lab as lab;
+pub(super) use geoshake_testkit::hopf_lab as lab;
 
 use lab::{FreeRun, Z};
 use nalgebra::DVector;

@@ -45,8 +45,8 @@
 //! direction. The runtime must stop there with a typed error and must not
 //! hand back a state from another branch of M^H.
 
+use geoshake::{Method, Options};
 use plotters::prelude::SeriesLabelPosition;
-use shake::{Method, Options};
 
 use super::hopf_free::lab;
 use crate::claims::{Bound, Claims};
@@ -537,9 +537,9 @@ fn fold(ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
         }
     }
     for h in [H, -H] {
-        let shake = shake::Integrator::new(start.system(), shake::ImplicitMidpoint, h)
+        let shake = geoshake::Integrator::new(start.system(), geoshake::ImplicitMidpoint, h)
             .shake()
-            .run(lab::state(&start.z), shake::Stop::Steps(30))
+            .run(lab::state(&start.z), geoshake::Stop::Steps(30))
             .execute();
         println!(
             "   SHAKE h = {h:+}: {}",

@@ -8,9 +8,9 @@
 //! (`reference::index1_midpoint_step`, Newton on (q1, p1, β̄) with num-dual
 //! derivatives), sharing no code with shake.
 
+use geoshake::models::IndexOne;
+use geoshake::{ImplicitMidpoint, Integrator, State};
 use nalgebra::DVector;
-use shake::models::IndexOne;
-use shake::{ImplicitMidpoint, Integrator, State};
 
 use crate::claims::{Bound, Claims};
 use crate::plot::PlotResult;

@@ -14,13 +14,13 @@
 //!   starts (Section 4).
 //! - The figure of one step (the paper's fig_pendulum).
 
-use nalgebra::DVector;
-use plotters::prelude::SeriesLabelPosition;
-use shake::models::{DoublePendulum, Pendulum};
-use shake::{
+use geoshake::models::{DoublePendulum, Pendulum};
+use geoshake::{
     BaseMap, ConstrainedSystem, ImplicitMidpoint, Integrator, State, Stop, StormerVerlet,
     SymplecticEuler,
 };
+use nalgebra::DVector;
+use plotters::prelude::SeriesLabelPosition;
 
 use super::util::{derivative_along, energy_windows, omega, state_of, tangent, z_of};
 use crate::claims::{Bound, Claims};

@@ -1,7 +1,7 @@
 //! Small measurements shared by the scenes.
 
+use geoshake::State;
 use nalgebra::{DMatrix, DVector};
-use shake::State;
 
 /// z = (q, p) as one vector.
 pub fn z_of(s: &State) -> DVector<f64> {

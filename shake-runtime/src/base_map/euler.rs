@@ -11,7 +11,7 @@ use crate::SolveError;
 /// symplectic, not symmetric, order 1; explicit for separable H.
 ///
 /// ```
-/// use shake_runtime::{BaseMap, SymplecticEuler};
+/// use geoshake_runtime::{BaseMap, SymplecticEuler};
 /// assert!(!SymplecticEuler::SYMMETRIC);
 /// assert_eq!(SymplecticEuler::ORDER, 1);
 /// ```

@@ -11,7 +11,7 @@ use crate::SolveError;
 /// symmetric for any H, order 2.
 ///
 /// ```
-/// use shake_runtime::{BaseMap, ImplicitMidpoint};
+/// use geoshake_runtime::{BaseMap, ImplicitMidpoint};
 /// assert!(ImplicitMidpoint::SYMMETRIC);
 /// assert_eq!(ImplicitMidpoint::ORDER, 2);
 /// ```

@@ -45,8 +45,8 @@ use crate::SolveError;
 /// fourth-order map and runs RATTLE over it).
 ///
 /// ```
-/// use shake_runtime::{BaseMap, ImplicitMidpoint, NewtonOptions};
-/// use shake_runtime::examples::HarmonicOscillator;
+/// use geoshake_runtime::{BaseMap, ImplicitMidpoint, NewtonOptions};
+/// use geoshake_runtime::examples::HarmonicOscillator;
 /// // One midpoint step of q'' = −q conserves the quadratic energy exactly.
 /// let sys = HarmonicOscillator;
 /// let mut ws = ImplicitMidpoint.workspace(1);
@@ -70,7 +70,7 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// Buffers for a system with `d` degrees of freedom.
     ///
     /// ```
-    /// use shake_runtime::{BaseMap, StormerVerlet};
+    /// use geoshake_runtime::{BaseMap, StormerVerlet};
     /// assert_eq!(StormerVerlet.workspace(3).dof(), 3);
     /// ```
     fn workspace(&self, d: usize) -> Self::Workspace;
@@ -90,7 +90,7 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// implicit map whose first guess happens to be exact is still implicit.
     ///
     /// ```
-    /// use shake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, examples::Pendulum};
     /// assert!(StormerVerlet.explicit_for(&Pendulum::default()));
     /// assert!(!ImplicitMidpoint.explicit_for(&Pendulum::default()));
     /// ```
@@ -107,7 +107,7 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// base-map or fibre-flow call in its Newton iteration.
     ///
     /// ```
-    /// use shake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
+    /// use geoshake_runtime::{BaseMap, ImplicitMidpoint, StormerVerlet, SymplecticEuler};
     /// assert_eq!(StormerVerlet.kick_drift_kick(), Some((0.5, 0.5)));
     /// assert_eq!(SymplecticEuler.kick_drift_kick(), Some((1.0, 0.0)));
     /// assert_eq!(ImplicitMidpoint.kick_drift_kick(), None);
@@ -154,8 +154,8 @@ pub trait BaseMap: Copy + Clone + std::fmt::Debug + Send + Sync + 'static {
     /// override it with increment forms of their stage equations.
     ///
     /// ```
-    /// use shake_runtime::{BaseMap, ImplicitMidpoint, NewtonOptions};
-    /// use shake_runtime::examples::HarmonicOscillator;
+    /// use geoshake_runtime::{BaseMap, ImplicitMidpoint, NewtonOptions};
+    /// use geoshake_runtime::examples::HarmonicOscillator;
     /// let mut ws = ImplicitMidpoint.workspace(1);
     /// let (mut dq, mut dp) = ([0.0], [0.0]);
     /// ImplicitMidpoint

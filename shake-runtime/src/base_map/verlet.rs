@@ -13,7 +13,7 @@ use crate::SolveError;
 /// constraints, SHAKE/RATTLE over it are the classical methods.
 ///
 /// ```
-/// use shake_runtime::{BaseMap, StormerVerlet};
+/// use geoshake_runtime::{BaseMap, StormerVerlet};
 /// assert!(StormerVerlet::SYMMETRIC);
 /// ```
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]

@@ -5,7 +5,7 @@
 /// (zeroed once here, written only by the system), and Newton matrices.
 ///
 /// ```
-/// use shake_runtime::BaseMapWorkspace;
+/// use geoshake_runtime::BaseMapWorkspace;
 /// let ws = BaseMapWorkspace::new(2);
 /// assert_eq!(ws.dof(), 2);
 /// ```
@@ -41,7 +41,7 @@ impl BaseMapWorkspace {
     /// Buffers for a system with `d` degrees of freedom.
     ///
     /// ```
-    /// let ws = shake_runtime::BaseMapWorkspace::new(3);
+    /// let ws = geoshake_runtime::BaseMapWorkspace::new(3);
     /// assert_eq!(ws.dof(), 3);
     /// ```
     pub fn new(d: usize) -> Self {
@@ -70,7 +70,7 @@ impl BaseMapWorkspace {
     /// The number d of degrees of freedom these buffers are for.
     ///
     /// ```
-    /// assert_eq!(shake_runtime::BaseMapWorkspace::new(4).dof(), 4);
+    /// assert_eq!(geoshake_runtime::BaseMapWorkspace::new(4).dof(), 4);
     /// ```
     pub fn dof(&self) -> usize {
         self.d
@@ -80,7 +80,7 @@ impl BaseMapWorkspace {
     /// Newton iteration from an explicit predictor instead.
     ///
     /// ```
-    /// let mut ws = shake_runtime::BaseMapWorkspace::new(2);
+    /// let mut ws = geoshake_runtime::BaseMapWorkspace::new(2);
     /// ws.reset_warm_start();
     /// ```
     pub fn reset_warm_start(&mut self) {

@@ -13,10 +13,10 @@
 //!
 //! The pool is rayon's global one (one thread per core, or
 //! `RAYON_NUM_THREADS`); to choose the number of threads, call inside
-//! `shake_runtime::rayon::ThreadPoolBuilder::new().num_threads(n).build()?.install(..)`.
+//! `geoshake_runtime::rayon::ThreadPoolBuilder::new().num_threads(n).build()?.install(..)`.
 //!
 //! ```
-//! use shake_runtime::{ensemble, Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+//! use geoshake_runtime::{ensemble, Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 //!
 //! let rattle = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).rattle();
 //! // Pendulums released at rest from angles 0.1, 0.2, …, 1.0.
@@ -52,7 +52,7 @@ use rayon::prelude::*;
 /// `template` (same system, base map, h, method and options).
 ///
 /// ```
-/// use shake_runtime::{ensemble, Integrator, ImplicitMidpoint, State, examples::Pendulum};
+/// use geoshake_runtime::{ensemble, Integrator, ImplicitMidpoint, State, examples::Pendulum};
 /// let shake = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).shake();
 /// let starts = vec![State::from_slices(&[0.0, -1.0], &[0.5, 0.0]); 4];
 /// let ends = ensemble(&shake, &starts, |integ, _, z0| integ.step(z0).unwrap());
@@ -77,7 +77,7 @@ where
 /// `initial`.
 ///
 /// ```
-/// use shake_runtime::{run_ensemble, Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// use geoshake_runtime::{run_ensemble, Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 /// let rattle = Integrator::new(Pendulum::default(), StormerVerlet, 0.05).rattle();
 /// let starts: Vec<State> = (0..8)
 ///     .map(|k| State::from_slices(&[0.0, -1.0], &[0.1 * k as f64, 0.0]))

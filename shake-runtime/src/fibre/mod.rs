@@ -44,7 +44,7 @@ use quadratic::rotation_generator;
 /// The fibre flow of a system together with its buffers.
 ///
 /// ```
-/// use shake_runtime::{FibreFlow, examples::Pendulum};
+/// use geoshake_runtime::{FibreFlow, examples::Pendulum};
 /// // The pendulum's fibre flow is the kick p ↦ p − λ ∇g(q) = p − 2λq.
 /// let sys = Pendulum::default();
 /// let mut flow = FibreFlow::new(&sys);
@@ -84,7 +84,7 @@ impl FibreFlow {
     /// evaluates the (constant) Hessians ∇²g_i and the Jacobian g_z at 0.
     ///
     /// ```
-    /// use shake_runtime::{FibreFlow, examples::Pendulum};
+    /// use geoshake_runtime::{FibreFlow, examples::Pendulum};
     /// let flow = FibreFlow::new(&Pendulum::default());
     /// ```
     pub fn new<S: ConstrainedSystem>(sys: &S) -> Self {
@@ -137,7 +137,7 @@ impl FibreFlow {
     /// docs for the method used for each kind of constraint).
     ///
     /// ```
-    /// use shake_runtime::{FibreFlow, examples::HopfHarmonic};
+    /// use geoshake_runtime::{FibreFlow, examples::HopfHarmonic};
     /// // The Hopf fibre flow is the rotation z_k ↦ e^{−2iλ} z_k.
     /// let sys = HopfHarmonic::unit();
     /// let mut flow = FibreFlow::new(&sys);
@@ -188,7 +188,7 @@ impl FibreFlow {
     /// - general: the flow minus the start (no better form is known here).
     ///
     /// ```
-    /// use shake_runtime::{FibreFlow, examples::HopfHarmonic};
+    /// use geoshake_runtime::{FibreFlow, examples::HopfHarmonic};
     /// let sys = HopfHarmonic::unit();
     /// let mut flow = FibreFlow::new(&sys);
     /// let (mut dq, mut dp) = ([0.0; 2], [0.0; 2]);

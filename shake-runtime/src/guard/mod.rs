@@ -243,7 +243,7 @@ impl Guard {
     /// ‖N₁ − N₀‖₁) and ready to factorise in `n`: in the workspace
     /// ([`after_shake`](Self::after_shake)) or on the stack (the
     /// fixed-size classical step of 2 to 8 constraints,
-    /// `shake::classical::fixed_m`). ‖N⁻¹‖₁ is the Neumann bound from the last
+    /// `geoshake::classical::fixed_m`). ‖N⁻¹‖₁ is the Neumann bound from the last
     /// state's when it is sharp enough, else Hager's estimate.
     #[allow(clippy::too_many_arguments)]
     #[inline]
@@ -350,7 +350,7 @@ impl Guard {
     /// The checks of [`after_shake`](Self::after_shake) past the residual,
     /// given N's check at the new state and ‖N₁ − N₀‖₁ (`change`), however
     /// they were computed (the fixed-size classical step computes them on
-    /// the stack, `shake::classical::fixed`).
+    /// the stack, `geoshake::classical::fixed`).
     #[allow(clippy::too_many_arguments)]
     #[inline]
     pub(crate) fn judge_shake(

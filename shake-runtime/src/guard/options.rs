@@ -5,7 +5,7 @@ use crate::newton::NewtonOptions;
 /// Tolerances, limits and checks of an [`Integrator`](crate::Integrator).
 ///
 /// ```
-/// use shake_runtime::Options;
+/// use geoshake_runtime::Options;
 /// let opts = Options { max_condition: 1e6, ..Options::default() };
 /// assert_eq!(opts.jump_ratio, 1.0);
 /// ```
@@ -69,7 +69,7 @@ pub struct Options {
     /// examples), while a substep that landed on another crossing of a
     /// fibre misses by the distance between the crossings. This is the one
     /// check that sees such a jump when N keeps its sign and λ stays near
-    /// its first prediction (Section 5.4.2; `tests/hard_degenerate.rs`).
+    /// its first prediction (Section 5.4.2; `tests/suite/hard_degenerate.rs`).
     /// It makes a composed step 1.8–3.4 times as costly (the step back,
     /// and in a lazily projected run Π of the start; BENCHMARKS.md,
     /// section 7.2); `f64::INFINITY` turns it off. Single steps are not

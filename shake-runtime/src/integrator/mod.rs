@@ -9,7 +9,7 @@
 //! in `initial_data` (onto M, and Π onto M^H) and `keep_positions`.
 //!
 //! ```
-//! use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+//! use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 //! let mut rattle = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).rattle();
 //! let z0 = rattle.project_to_hidden(&State::from_slices(&[0.6, -0.8], &[0.8, 0.6])).unwrap();
 //! let out = rattle.run(z0, Stop::Time(1.0)).stride(10).execute();
@@ -42,7 +42,7 @@ pub use crate::trajectory::Trajectory;
 /// memory); a step allocates nothing.
 ///
 /// ```
-/// use shake_runtime::{Integrator, ImplicitMidpoint, State, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, ImplicitMidpoint, State, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).rattle();
 /// let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
 /// let z1 = integ.step(&z0).unwrap();
@@ -82,7 +82,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// by the first step as [`StepError::InvalidInput`]). Defaults to RATTLE.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, SymplecticEuler, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, SymplecticEuler, examples::Pendulum};
     /// let integ = Integrator::new(Pendulum::default(), SymplecticEuler, 0.01);
     /// assert_eq!(integ.step_size(), 0.01);
     /// ```
@@ -111,7 +111,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Use geometric SHAKE.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).shake().method(), Method::Shake);
     /// ```
     pub fn shake(mut self) -> Self {
@@ -122,7 +122,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Use geometric RATTLE (the default).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).rattle().method(), Method::Rattle);
     /// ```
     pub fn rattle(mut self) -> Self {
@@ -133,7 +133,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Use the given method.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
     /// let i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_method(Method::Shake);
     /// assert_eq!(i.method(), Method::Shake);
     /// ```
@@ -147,7 +147,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// base map (see [`composition`](crate::composition)).
     ///
     /// ```
-    /// use shake_runtime::{Composition, Integrator, ImplicitMidpoint, examples::Pendulum};
+    /// use geoshake_runtime::{Composition, Integrator, ImplicitMidpoint, examples::Pendulum};
     /// let i = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).composed(Composition::YOSHIDA_6);
     /// assert_eq!(i.order(), 6);
     /// assert_eq!(i.composition(), Composition::YOSHIDA_6);
@@ -167,7 +167,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// either way.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
     /// let i = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).compensated(false);
     /// assert!(!i.is_compensated());
     /// ```
@@ -183,10 +183,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// analytic Jacobian, a projection by one linear solve, and one
     /// factorisation of N per step for the checks and the projection.
     /// `false` takes the general path everywhere; both give the same steps
-    /// to round-off (`tests/fast_paths.rs`).
+    /// to round-off (`tests/suite/fast_paths.rs`).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
     /// let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
     /// let fast = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).step(&z0).unwrap();
     /// let general = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
@@ -206,10 +206,10 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// their own size (with N a number for one constraint). `false` keeps
     /// the classical path on the workspace's vectors; both give the same
     /// steps to round-off, and to the bit for two to eight constraints
-    /// (`tests/fast_paths.rs`).
+    /// (`tests/suite/fast_paths.rs`).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
     /// let z0 = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
     /// let fixed = Integrator::new(Pendulum::default(), StormerVerlet, 0.01).step(&z0).unwrap();
     /// let slices = Integrator::new(Pendulum::default(), StormerVerlet, 0.01)
@@ -226,7 +226,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Whether runs use compensated summation.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
     /// assert!(Integrator::new(Pendulum::default(), StormerVerlet, 0.01).is_compensated());
     /// ```
     pub fn is_compensated(&self) -> bool {
@@ -237,7 +237,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// [`composed`](Self::composed)).
     ///
     /// ```
-    /// use shake_runtime::{Composition, Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Composition, Integrator, StormerVerlet, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).composition(), Composition::SINGLE);
     /// ```
     pub fn composition(&self) -> Composition {
@@ -251,7 +251,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// composition of a non-symmetric method does not raise its order).
     ///
     /// ```
-    /// use shake_runtime::{Composition, Integrator, SymplecticEuler, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Composition, Integrator, SymplecticEuler, StormerVerlet, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).order(), 2);
     /// let euler = Integrator::new(Pendulum::default(), SymplecticEuler, 0.1).composed(Composition::TRIPLE_JUMP);
     /// assert_eq!(euler.order(), 1);
@@ -277,7 +277,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Replace the options.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Options, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Options, examples::Pendulum};
     /// let opts = Options { project_every_step: true, ..Options::default() };
     /// let i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_options(opts);
     /// assert!(i.options().project_every_step);
@@ -290,7 +290,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Record a [`DiagnosticRecord`](crate::DiagnosticRecord) with every stored or observed state.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).with_diagnostics();
     /// let out = i.run(State::from_slices(&[0.0, -1.0], &[0.3, 0.0]), Stop::Steps(2)).execute();
     /// assert_eq!(out.trajectory.diagnostics.len(), 3);
@@ -303,7 +303,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// The same integrator with another step size (buffers are kept).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// assert_eq!(i.with_step_size(-0.1).step_size(), -0.1);
     /// ```
@@ -315,7 +315,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// The step size h.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.25).step_size(), 0.25);
     /// ```
     pub fn step_size(&self) -> f64 {
@@ -325,7 +325,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// SHAKE or RATTLE.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Method, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).method(), Method::Rattle);
     /// ```
     pub fn method(&self) -> Method {
@@ -335,7 +335,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// The options in force.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, Options, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, Options, examples::Pendulum};
     /// assert_eq!(*Integrator::new(Pendulum::default(), StormerVerlet, 0.1).options(), Options::default());
     /// ```
     pub fn options(&self) -> &Options {
@@ -345,7 +345,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// The system.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
     /// assert_eq!(Integrator::new(Pendulum::default(), StormerVerlet, 0.1).system().length, 1.0);
     /// ```
     pub fn system(&self) -> &S {
@@ -355,7 +355,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// The base map.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, examples::Pendulum};
     /// let i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// assert_eq!(*i.base_map(), StormerVerlet);
     /// ```
@@ -368,7 +368,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// paper's Section 5.1.3.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
     /// let mut i = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).shake();
     /// i.step(&State::from_slices(&[0.0, -1.0], &[0.0, 0.0])).unwrap();
     /// // At rest at the bottom the rod pulls up: p⁺ = p − 2λq with q = (0, −1), so λ > 0.
@@ -438,7 +438,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// state with `z`. On error `z` is left unchanged.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, ConstrainedSystem, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, ConstrainedSystem, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).shake();
     /// let mut z = State::from_slices(&[0.6, -0.8], &[0.8, 0.6]);
     /// integ.step_in_place(&mut z).unwrap();
@@ -494,7 +494,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// errors report step 1 and t = h (the step from t0 = 0).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, ImplicitMidpoint, State, ConstrainedSystem, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, ImplicitMidpoint, State, ConstrainedSystem, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1);
     /// let z1 = integ.step(&State::from_slices(&[0.6, -0.8], &[0.8, 0.6])).unwrap();
     /// let mut hidden = [0.0];

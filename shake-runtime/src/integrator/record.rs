@@ -149,7 +149,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         let lazy = self.method == Method::Rattle && !projected;
         let rattle_iterations = if lazy && self.steps.map.shown_fresh {
             // The step that made (q, p) also made its Π (`StepMap::show`),
-            // with the operations of `shake::classical::project`.
+            // with the operations of `geoshake::classical::project`.
             std::mem::swap(scratch, &mut self.steps.map.shown);
             self.steps.map.shown_fresh = false;
             1

@@ -31,7 +31,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// RATTLE states, at a fraction of the cost.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, ImplicitMidpoint, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.01);
     /// let mut energies = Vec::new();
     /// let out = integ
@@ -53,7 +53,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     ///
     /// ```
     /// use std::ops::ControlFlow;
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let mut done = 0.0;
     /// let out = integ.run_observed(

@@ -4,7 +4,7 @@
 /// member is at fault, the member (its row in the table).
 ///
 /// ```
-/// use shake_runtime::particles::{Table, TopologyError};
+/// use geoshake_runtime::particles::{Table, TopologyError};
 /// let mut bonds = Table::new(2, 1);
 /// let e = bonds.push(&[0, 0], &[1.0]).unwrap_err();
 /// assert!(matches!(e, TopologyError::RepeatedParticle { member: 0, particle: 0, .. }));
@@ -111,7 +111,7 @@ pub enum TopologyError {
 /// k − 1. The projection of initial data reports step 0 and time t0.
 ///
 /// ```
-/// use shake_runtime::particles::ParticleError;
+/// use geoshake_runtime::particles::ParticleError;
 /// let e = ParticleError::StepSize { h: -1.0 };
 /// assert!(e.to_string().contains("step size"));
 /// ```

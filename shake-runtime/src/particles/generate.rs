@@ -40,7 +40,7 @@ pub const BOND: f64 = 1.5;
 /// seeded, good enough for initial conditions.
 ///
 /// ```
-/// use shake_runtime::particles::generate::SplitMix64;
+/// use geoshake_runtime::particles::generate::SplitMix64;
 /// let mut r = SplitMix64::new(1);
 /// let u = r.uniform();
 /// assert!((0.0..1.0).contains(&u));
@@ -149,7 +149,7 @@ fn thermal_momenta(rng: &mut SplitMix64, masses: &[f64]) -> Vec<f64> {
 /// [`set_temperature`].
 ///
 /// ```
-/// let (sys, st) = shake_runtime::particles::generate::water(10, 3).unwrap();
+/// let (sys, st) = geoshake_runtime::particles::generate::water(10, 3).unwrap();
 /// assert_eq!((sys.particles(), sys.constraints(), st.q().len()), (30, 30, 90));
 /// ```
 pub fn water(n: usize, seed: u64) -> Result<(ParticleSystem, ParticleState), TopologyError> {
@@ -209,7 +209,7 @@ pub fn water(n: usize, seed: u64) -> Result<(ParticleSystem, ParticleState), Top
 /// beads k and k + 1). Momenta thermal, not yet projected.
 ///
 /// ```
-/// let (sys, _) = shake_runtime::particles::generate::chain(10, 3).unwrap();
+/// let (sys, _) = geoshake_runtime::particles::generate::chain(10, 3).unwrap();
 /// assert_eq!((sys.particles(), sys.constraints()), (11, 10));
 /// ```
 pub fn chain(links: usize, seed: u64) -> Result<(ParticleSystem, ParticleState), TopologyError> {
@@ -223,7 +223,7 @@ pub fn chain(links: usize, seed: u64) -> Result<(ParticleSystem, ParticleState),
 /// thermal motion), family `bend`.
 ///
 /// ```
-/// let (sys, _) = shake_runtime::particles::generate::chain_with_springs(10, 3).unwrap();
+/// let (sys, _) = geoshake_runtime::particles::generate::chain_with_springs(10, 3).unwrap();
 /// assert_eq!(sys.potential_families().len(), 1);
 /// ```
 pub fn chain_with_springs(
@@ -272,7 +272,7 @@ fn chain_parts(
 /// Scaling keeps G M⁻¹ p = 0, so it may follow the projection.
 ///
 /// ```
-/// use shake_runtime::particles::generate;
+/// use geoshake_runtime::particles::generate;
 /// let (sys, mut st) = generate::water(10, 3).unwrap();
 /// generate::set_temperature(&sys, &mut st, 300.0);
 /// assert!((generate::temperature(&sys, &st) - 300.0).abs() < 1e-9);
@@ -306,7 +306,7 @@ pub fn temperature(system: &ParticleSystem, state: &ParticleState) -> f64 {
 /// reports, measured from the state alone (not from the solver's residual).
 ///
 /// ```
-/// use shake_runtime::particles::generate;
+/// use geoshake_runtime::particles::generate;
 /// let (sys, st) = generate::chain(10, 3).unwrap();
 /// let t = sys.constraint_families()[0].table();
 /// assert!(generate::max_rel_length_error(t, 3, st.q()) < 1e-15);

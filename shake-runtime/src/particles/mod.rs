@@ -27,7 +27,7 @@
 //! # Use
 //!
 //! ```
-//! use shake_runtime::particles::{
+//! use geoshake_runtime::particles::{
 //!     stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, Table,
 //! };
 //!

@@ -36,7 +36,7 @@ pub enum SolverChoice {
 /// Tolerances and choices of a [`Rattle`](super::Rattle).
 ///
 /// ```
-/// use shake_runtime::particles::{Method, Options};
+/// use geoshake_runtime::particles::{Method, Options};
 /// let o = Options { method: Method::Shake, ..Options::default() };
 /// assert_eq!(o.tol, 1e-10);
 /// ```
@@ -67,7 +67,7 @@ impl Options {
     /// [`Rattle::new`](super::Rattle::new) calls it.
     ///
     /// ```
-    /// use shake_runtime::particles::{Options, ParticleError};
+    /// use geoshake_runtime::particles::{Options, ParticleError};
     /// assert!(Options::default().validate().is_ok());
     /// let tiny = Options { tol: 1e-20, ..Options::default() };
     /// assert!(matches!(

@@ -39,7 +39,7 @@ enum Path {
 /// allocates nothing.
 ///
 /// ```
-/// use shake_runtime::particles::{generate, Options, Rattle};
+/// use geoshake_runtime::particles::{generate, Options, Rattle};
 /// let (system, mut state) = generate::water(8, 1).unwrap();
 /// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
 /// rattle.project(&mut state).unwrap();
@@ -163,7 +163,7 @@ impl Rattle {
     /// (tests, benchmarks). No effect on the coupled paths.
     ///
     /// ```
-    /// use shake_runtime::particles::{generate, Options, Rattle};
+    /// use geoshake_runtime::particles::{generate, Options, Rattle};
     /// let (system, _) = generate::water(2, 1).unwrap();
     /// let mut rattle = Rattle::new(system, 1e-3, Options::default()).unwrap();
     /// rattle.use_general_cluster_kernel();

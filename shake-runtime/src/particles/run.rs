@@ -61,7 +61,7 @@ impl Rattle {
     /// ([`ParticleError::Storage`] when they do not fit).
     ///
     /// ```
-    /// use shake_runtime::particles::{generate, Options, ParticleError, Rattle};
+    /// use geoshake_runtime::particles::{generate, Options, ParticleError, Rattle};
     /// let (system, mut state) = generate::chain(20, 7).unwrap();
     /// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();
@@ -160,7 +160,7 @@ impl Rattle {
     /// rest is checked as [`run`](Self::run) checks it.
     ///
     /// ```
-    /// use shake_runtime::particles::{generate, Options, ParticleError, Rattle};
+    /// use geoshake_runtime::particles::{generate, Options, ParticleError, Rattle};
     /// let (system, mut state) = generate::chain(4, 7).unwrap();
     /// let mut rattle = Rattle::new(system, 0.5, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();

@@ -10,7 +10,7 @@
 /// treated as new.
 ///
 /// ```
-/// use shake_runtime::particles::ParticleState;
+/// use geoshake_runtime::particles::ParticleState;
 /// let s = ParticleState::new(vec![0.0; 6], vec![1.0; 6]).with_time(5.0);
 /// assert_eq!((s.step(), s.time(), s.q().len()), (0, 5.0, 6));
 /// ```
@@ -96,7 +96,7 @@ impl ParticleState {
 /// time. 16·d bytes per state plus 16 for step and time.
 ///
 /// ```
-/// use shake_runtime::particles::Trajectory;
+/// use geoshake_runtime::particles::Trajectory;
 /// let t = Trajectory::new(3);
 /// assert!(t.is_empty());
 /// ```

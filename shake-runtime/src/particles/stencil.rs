@@ -11,7 +11,7 @@
 /// from a template; a hand-written one is a few lines:
 ///
 /// ```
-/// use shake_runtime::particles::Stencil;
+/// use geoshake_runtime::particles::Stencil;
 ///
 /// /// g = |x_a − x_b|² − l², l from the table.
 /// struct Distance;

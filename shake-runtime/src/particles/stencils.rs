@@ -10,7 +10,7 @@ use super::Stencil;
 /// origin keeps its constraints to round-off of |x_a − x_b|.
 ///
 /// ```
-/// use shake_runtime::particles::{stencils::Distance, Stencil};
+/// use geoshake_runtime::particles::{stencils::Distance, Stencil};
 /// let mut grad = [0.0; 6];
 /// let g = Distance::<3>.gradient(&[1e3, 0.0, 0.0, 1e3 + 1.0, 0.0, 0.0], &[1.0], &mut grad);
 /// assert_eq!(g, 0.0);
@@ -49,7 +49,7 @@ impl<const D: usize> Stencil for Distance<D> {
 /// (`ARITY = 1`, `DATA = 1`), the pivot of a pendulum.
 ///
 /// ```
-/// use shake_runtime::particles::{stencils::Anchor, Stencil};
+/// use geoshake_runtime::particles::{stencils::Anchor, Stencil};
 /// assert_eq!(Anchor::<2>.value(&[0.6, -0.8], &[1.0]), 0.0);
 /// ```
 #[derive(Copy, Clone, Debug, Default)]
@@ -79,7 +79,7 @@ impl<const D: usize> Stencil for Anchor<D> {
 /// A harmonic spring V = (k/2)(|x_a − x_b| − r₀)², `DATA = 2` (k, r₀).
 ///
 /// ```
-/// use shake_runtime::particles::{stencils::Spring, Stencil};
+/// use geoshake_runtime::particles::{stencils::Spring, Stencil};
 /// let mut grad = [0.0; 6];
 /// let v = Spring::<3>.gradient(&[0.0, 0.0, 0.0, 2.0, 0.0, 0.0], &[3.0, 1.0], &mut grad);
 /// assert_eq!((v, grad[3]), (1.5, 3.0));
@@ -126,7 +126,7 @@ impl<const D: usize> Stencil for Spring<D> {
 /// e.g. gravity c = (0, m γ).
 ///
 /// ```
-/// use shake_runtime::particles::{stencils::LinearField, Stencil};
+/// use geoshake_runtime::particles::{stencils::LinearField, Stencil};
 /// assert_eq!(LinearField::<2>.value(&[3.0, 2.0], &[0.0, 9.81]), 2.0 * 9.81);
 /// ```
 #[derive(Copy, Clone, Debug, Default)]

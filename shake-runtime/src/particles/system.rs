@@ -305,7 +305,7 @@ impl<S: Stencil> PotentialFamily for Family<S> {
 /// family in the order they were added, member by member within a family.
 ///
 /// ```
-/// use shake_runtime::particles::{ParticleSystem, Stencil, Table};
+/// use geoshake_runtime::particles::{ParticleSystem, Stencil, Table};
 /// # struct Distance;
 /// # impl Stencil for Distance {
 /// #     const ARITY: usize = 2; const DIM: usize = 3; const DATA: usize = 1;

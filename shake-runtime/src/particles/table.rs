@@ -9,7 +9,7 @@ use super::TopologyError;
 /// of 16.
 ///
 /// ```
-/// use shake_runtime::particles::Table;
+/// use geoshake_runtime::particles::Table;
 /// let mut bonds = Table::new(2, 1);
 /// bonds.push(&[0, 1], &[1.0]).unwrap();
 /// bonds.push(&[1, 2], &[1.5]).unwrap();

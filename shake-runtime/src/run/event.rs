@@ -11,7 +11,7 @@ pub type StepObserver<'a> = dyn FnMut(&StepEvent) -> ControlFlow<()> + 'a;
 /// `t` = t0 + step·h.
 ///
 /// ```
-/// use shake_runtime::{StepEvent, StepInfo};
+/// use geoshake_runtime::{StepEvent, StepInfo};
 /// let e = StepEvent { step: 3, steps: 10, t: 0.3, info: StepInfo::default() };
 /// assert_eq!(e.fraction(), 0.3);
 /// ```
@@ -31,7 +31,7 @@ impl StepEvent {
     /// step / steps, in [0, 1] (1 for a run of no steps).
     ///
     /// ```
-    /// use shake_runtime::{StepEvent, StepInfo};
+    /// use geoshake_runtime::{StepEvent, StepInfo};
     /// let e = StepEvent { step: 5, steps: 5, t: 1.0, info: StepInfo::default() };
     /// assert_eq!(e.fraction(), 1.0);
     /// ```

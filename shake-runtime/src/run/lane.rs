@@ -23,7 +23,7 @@
 //! stops with what the driver's loop would hold at that step (the state
 //! before it where that is read, the SHAKE state of the last stored step
 //! of a lazily projecting run) and hands the error to the driver, which
-//! ends the run as it ends any run (`tests/run_lane.rs` compares the two
+//! ends the run as it ends any run (`tests/suite/run_lane.rs` compares the two
 //! loops state by state, and on failure, trajectory and error).
 
 use crate::base_map::BaseMap;

@@ -15,7 +15,7 @@
 //! with no `on_step` observer and no diagnostics, loops inside that step
 //! (`lane`) and comes back here only to end:
 //! the same steps and stored states, without the layers between this
-//! loop and the substep (`tests/run_lane.rs`).
+//! loop and the substep (`tests/suite/run_lane.rs`).
 
 mod event;
 pub(crate) mod lane;
@@ -34,7 +34,7 @@ use stepper::{Projection, Stepper};
 /// When a run stops.
 ///
 /// ```
-/// use shake_runtime::Stop;
+/// use geoshake_runtime::Stop;
 /// let a = Stop::Steps(100);
 /// let b = Stop::Time(1.0);
 /// assert_ne!(a, b);
@@ -53,7 +53,7 @@ pub enum Stop {
 /// stopped early, why. On an error the last good state is always stored.
 ///
 /// ```
-/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
 /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(3)).execute();
 /// let traj = out.into_result().unwrap();
@@ -71,7 +71,7 @@ impl RunOutcome {
     /// `Ok(trajectory)` or `Err((partial trajectory, error))`.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.0);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.0, 0.0]), Stop::Steps(3)).execute();
     /// assert!(out.into_result().is_err());
@@ -88,7 +88,7 @@ impl RunOutcome {
 /// A configured run; see [`Integrator::run`](crate::Integrator::run).
 ///
 /// ```
-/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
 /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
 /// let out = integ
 ///     .run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(10))
@@ -134,7 +134,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     /// (default 1; 0 is an [`StepError::InvalidInput`]).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(7)).stride(3).execute();
     /// assert_eq!(out.trajectory.steps(), vec![0, 3, 6, 7]);
@@ -147,7 +147,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     /// The time of the initial state (default 0).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.5);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Time(3.0)).start_time(2.0).execute();
     /// assert_eq!(out.trajectory.times(), vec![2.0, 2.5, 3.0]);
@@ -161,7 +161,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     /// true); with `false` only the observer sees them.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let mut n = 0;
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(5))
@@ -178,7 +178,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     /// the stride; the state is projected onto M^H for RATTLE).
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let mut times = Vec::new();
     /// let _ = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(2))
@@ -206,10 +206,10 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     ///
     /// ```
     /// use std::ops::ControlFlow;
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let mut seen = 0;
-    /// let mut until_4 = |e: &shake_runtime::StepEvent| {
+    /// let mut until_4 = |e: &geoshake_runtime::StepEvent| {
     ///     seen += 1;
     ///     if e.step == 4 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
     /// };
@@ -232,7 +232,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
     /// observed) even when it is not on the stride.
     ///
     /// ```
-    /// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
     /// let out = integ.run(State::from_slices(&[0.0, -1.0], &[0.5, 0.0]), Stop::Steps(3)).execute();
     /// assert!(out.error.is_none());
@@ -477,8 +477,8 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 if f(&event).is_break() {
                     // Stopped by the observer: the trajectory ends at the
                     // state it saw.
-                    if !on_stride {
-                        if let Err(e) = integ.record(
+                    if !on_stride
+                        && let Err(e) = integ.record(
                             &q,
                             &p,
                             per_step,
@@ -489,9 +489,9 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                             store,
                             &mut observer,
                             &mut scratch,
-                        ) {
-                            return fail(traj, e);
-                        }
+                        )
+                    {
+                        return fail(traj, e);
                     }
                     break;
                 }

@@ -30,7 +30,7 @@
 /// chains agree, above 1.01 a sign that they have not mixed.
 ///
 /// ```
-/// use shake_runtime::sampler::rhat;
+/// use geoshake_runtime::sampler::rhat;
 /// // Two chains that sample disjoint regions: R̂ far above 1 (ranks bound
 /// // it: about 1.8 for two chains of 100 draws).
 /// let a: Vec<f64> = (0..100).map(|i| (i as f64 * 0.7).sin()).collect();
@@ -61,7 +61,7 @@ pub fn rhat<C: AsRef<[f64]>>(chains: &[C]) -> f64 {
 /// the centre of the distribution.
 ///
 /// ```
-/// use shake_runtime::sampler::ess_bulk;
+/// use geoshake_runtime::sampler::ess_bulk;
 /// // An AR(1) chain x_t = 0.9 x_{t−1} + e_t has τ = (1 + 0.9)/(1 − 0.9) = 19.
 /// let mut x = vec![0.0f64; 4000];
 /// let mut s = 1u64;
@@ -89,7 +89,7 @@ pub fn ess_bulk<C: AsRef<[f64]>>(chains: &[C]) -> f64 {
 /// draws is their standard deviation over √ESS.
 ///
 /// ```
-/// use shake_runtime::sampler::ess_mean;
+/// use geoshake_runtime::sampler::ess_mean;
 /// // Alternating draws are anticorrelated: the mean is known better than
 /// // from independent draws, ESS > the number of draws.
 /// let x: Vec<f64> = (0..400).map(|i| if i % 2 == 0 { 1.0 } else { -1.0 } + 0.01 * (i as f64).sin()).collect();

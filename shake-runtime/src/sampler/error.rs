@@ -7,8 +7,8 @@ use crate::error::{human, sci, StepError};
 /// Why [`sample`](super::sample) refused to start.
 ///
 /// ```
-/// use shake_runtime::sampler::{sample, SamplerError, SamplerOptions};
-/// use shake_runtime::examples::Pendulum;
+/// use geoshake_runtime::sampler::{sample, SamplerError, SamplerOptions};
+/// use geoshake_runtime::examples::Pendulum;
 /// let opts = SamplerOptions { draws: 0, ..SamplerOptions::default() };
 /// let err = sample(&Pendulum::default(), &[[1.0, 0.0]], &opts).unwrap_err();
 /// assert!(matches!(err, SamplerError::InvalidOption { what: "draws", .. }));

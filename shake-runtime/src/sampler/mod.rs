@@ -71,8 +71,8 @@
 //! Vehtari et al. (2021) ([`rhat`], [`ess_bulk`]).
 //!
 //! ```
-//! use shake_runtime::examples::Pendulum;
-//! use shake_runtime::sampler::{sample, Estimate, SamplerOptions};
+//! use geoshake_runtime::examples::Pendulum;
+//! use geoshake_runtime::sampler::{sample, Estimate, SamplerOptions};
 //!
 //! // Without gravity U = 0: the uniform distribution on the unit circle,
 //! // where E[x²] = 1/2.
@@ -83,7 +83,7 @@
 //! assert!((x2.mean - 0.5).abs() < 5.0 * x2.mcse);
 //! let summary = samples.summary();
 //! assert!(summary.max_rhat() < 1.05 && summary.warnings().is_empty());
-//! # Ok::<(), shake_runtime::sampler::SamplerError>(())
+//! # Ok::<(), geoshake_runtime::sampler::SamplerError>(())
 //! ```
 
 mod adapt;
@@ -108,7 +108,7 @@ use chain::Chain;
 /// The settings of a sampler run.
 ///
 /// ```
-/// use shake_runtime::sampler::SamplerOptions;
+/// use geoshake_runtime::sampler::SamplerOptions;
 /// let opts = SamplerOptions { steps: 20, ..SamplerOptions::default() };
 /// assert_eq!((opts.chains, opts.draws, opts.target_acceptance), (4, 1000, Some(0.8)));
 /// ```
@@ -165,7 +165,7 @@ impl SamplerOptions {
     /// Refuses options outside their domain.
     ///
     /// ```
-    /// use shake_runtime::sampler::{SamplerError, SamplerOptions};
+    /// use geoshake_runtime::sampler::{SamplerError, SamplerOptions};
     /// let bad = SamplerOptions { step_size: -0.1, ..SamplerOptions::default() };
     /// assert!(matches!(bad.validate(), Err(SamplerError::InvalidOption { what: "step_size", .. })));
     /// assert!(SamplerOptions::default().validate().is_ok());
@@ -215,8 +215,8 @@ impl SamplerOptions {
 /// [`Samples::summary`].
 ///
 /// ```
-/// use shake_runtime::examples::Pendulum;
-/// use shake_runtime::sampler::{sample, SamplerError, SamplerOptions};
+/// use geoshake_runtime::examples::Pendulum;
+/// use geoshake_runtime::sampler::{sample, SamplerError, SamplerOptions};
 /// let circle = Pendulum { gravity: 0.0, length: 1.0 };
 /// let opts = SamplerOptions::default();
 /// // (1, 0.1) is not on the unit circle.

@@ -12,7 +12,7 @@ use super::convergence::{ess_bulk, ess_mean, rhat};
 /// the run.
 ///
 /// ```
-/// use shake_runtime::sampler::Rejection;
+/// use geoshake_runtime::sampler::Rejection;
 /// assert_eq!(Rejection::Reverse.name(), "reverse");
 /// ```
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
@@ -63,7 +63,7 @@ impl Rejection {
     /// The kind of a step's failure in the engine.
     ///
     /// ```
-    /// use shake_runtime::{sampler::Rejection, SolveError, Stage, StepError};
+    /// use geoshake_runtime::{sampler::Rejection, SolveError, Stage, StepError};
     /// let e = StepError::NewtonNotConverged {
     ///     stage: Stage::Shake, step: 1, t: 0.1,
     ///     source: SolveError::NotConverged { iterations: 50, residual: 1e-3 },
@@ -91,7 +91,7 @@ impl Rejection {
 /// Rejections by kind.
 ///
 /// ```
-/// use shake_runtime::sampler::{Rejection, RejectionCounts};
+/// use geoshake_runtime::sampler::{Rejection, RejectionCounts};
 /// let mut c = RejectionCounts::default();
 /// c.add(Rejection::Newton);
 /// assert_eq!((c.newton, c.total()), (1, 1));
@@ -119,7 +119,7 @@ impl RejectionCounts {
     /// The count of one kind.
     ///
     /// ```
-    /// use shake_runtime::sampler::{Rejection, RejectionCounts};
+    /// use geoshake_runtime::sampler::{Rejection, RejectionCounts};
     /// let c = RejectionCounts { reverse: 3, ..Default::default() };
     /// assert_eq!(c.get(Rejection::Reverse), 3);
     /// ```
@@ -190,8 +190,8 @@ impl Samples {
     /// Draw `i` of chain `c`.
     ///
     /// ```
-    /// # use shake_runtime::sampler::{sample, SamplerOptions};
-    /// # use shake_runtime::examples::Pendulum;
+    /// # use geoshake_runtime::sampler::{sample, SamplerOptions};
+    /// # use geoshake_runtime::examples::Pendulum;
     /// let opts = SamplerOptions { chains: 2, draws: 5, warmup: 0, ..Default::default() };
     /// let s = sample(&Pendulum { gravity: 0.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
     /// let q = s.draw(1, 4);
@@ -206,8 +206,8 @@ impl Samples {
     /// [`Estimate::of`] for an expectation E(f).
     ///
     /// ```
-    /// # use shake_runtime::sampler::{sample, SamplerOptions};
-    /// # use shake_runtime::examples::Pendulum;
+    /// # use geoshake_runtime::sampler::{sample, SamplerOptions};
+    /// # use geoshake_runtime::examples::Pendulum;
     /// let opts = SamplerOptions { chains: 2, draws: 5, warmup: 0, ..Default::default() };
     /// let s = sample(&Pendulum { gravity: 0.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
     /// let x2 = s.series(|q| q[0] * q[0]);
@@ -222,8 +222,8 @@ impl Samples {
     /// The rejections of chain `c` by kind.
     ///
     /// ```
-    /// # use shake_runtime::sampler::{sample, SamplerOptions};
-    /// # use shake_runtime::examples::Pendulum;
+    /// # use geoshake_runtime::sampler::{sample, SamplerOptions};
+    /// # use geoshake_runtime::examples::Pendulum;
     /// let opts = SamplerOptions { chains: 1, draws: 50, warmup: 0, ..Default::default() };
     /// let s = sample(&Pendulum { gravity: 0.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
     /// let accepted = s.accepted.iter().filter(|a| **a).count();
@@ -244,8 +244,8 @@ impl Samples {
     /// acceptance, step size, rejections.
     ///
     /// ```
-    /// # use shake_runtime::sampler::{sample, SamplerOptions};
-    /// # use shake_runtime::examples::Pendulum;
+    /// # use geoshake_runtime::sampler::{sample, SamplerOptions};
+    /// # use geoshake_runtime::examples::Pendulum;
     /// let opts = SamplerOptions { chains: 2, draws: 400, warmup: 200, ..Default::default() };
     /// let s = sample(&Pendulum { gravity: 1.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
     /// let summary = s.summary();
@@ -280,7 +280,7 @@ impl Samples {
 /// An expectation estimated from several chains of one series.
 ///
 /// ```
-/// use shake_runtime::sampler::Estimate;
+/// use geoshake_runtime::sampler::Estimate;
 /// let e = Estimate::of(&[vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0]]);
 /// assert_eq!(e.mean, 5.5);
 /// ```

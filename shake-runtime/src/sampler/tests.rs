@@ -1,6 +1,6 @@
 //! The sampler on the crate's hand-written example systems: its refusals,
 //! its counted rejections, its determinism. The known-answer tests on the
-//! sphere, the torus and SO(3) are in the workspace's tests/sampler.rs,
+//! sphere, the torus and SO(3) are in the workspace's tests/suite/sampler.rs,
 //! with systems declared by the macro.
 
 use super::*;

@@ -5,7 +5,7 @@
 /// the m (b + 1) stored numbers in place. Row i stores N_{i, i−b..=i}.
 ///
 /// ```
-/// use shake_runtime::solver::BandCholesky;
+/// use geoshake_runtime::solver::BandCholesky;
 /// let mut n = BandCholesky::new(3, &[(0, 0), (1, 0), (1, 1), (2, 1), (2, 2)]);
 /// assert_eq!(n.bandwidth(), 1);
 /// for i in 0..3 {

@@ -18,7 +18,7 @@
 //! solved densely on its own (see `particles::cluster`).
 //!
 //! ```
-//! use shake_runtime::solver::SpdSolver;
+//! use geoshake_runtime::solver::SpdSolver;
 //! // N = [[2, -1], [-1, 2]] (lower triangle given).
 //! let mut n = SpdSolver::band(2, &[(0, 0), (1, 0), (1, 1)]);
 //! for (i, j, v) in [(0, 0, 2.0), (1, 0, -1.0), (1, 1, 2.0)] {

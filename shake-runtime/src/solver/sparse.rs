@@ -20,7 +20,7 @@ use faer::{Conj, MatMut, Par, Side};
 /// The lower triangle of N is stored by columns (CSC).
 ///
 /// ```
-/// use shake_runtime::solver::SparseCholesky;
+/// use geoshake_runtime::solver::SparseCholesky;
 /// // An arrow: every row couples to the last one.
 /// let n = 4;
 /// let mut lower = vec![];

@@ -7,7 +7,7 @@
 //! stack arrays of those sizes, one constraint with N and SHAKE's Jacobian
 //! as numbers (`check_one`), two to eight with N and its factors on the
 //! stack (`check_few`). The same checks in the same order, so the same
-//! steps (`tests/fast_paths.rs`: the same bits where the kernels are).
+//! steps (`tests/suite/fast_paths.rs`: the same bits where the kernels are).
 //!
 //! The sizes reach the step through [`ConstrainedSystem::with_sizes`]:
 //! [`Substep`] is a [`SizeVisitor`]. A wrapper around a system (one that
@@ -290,7 +290,7 @@ fn check_one<S: ConstrainedSystem, const D: usize>(
         }
     };
     // As `read_n` and `factor_and_check` leave the workspace: N
-    // factorised in `jac` (for the lazy Π of `shake::classical::project`), N in
+    // factorised in `jac` (for the lazy Π of `geoshake::classical::project`), N in
     // `n.mat` and `n.prev`.
     let change = (n - ws.n.prev[0]).abs();
     ws.n.prev[0] = n;
@@ -316,7 +316,7 @@ fn check_one<S: ConstrainedSystem, const D: usize>(
 /// but N, its factors and σ live in arrays whose sizes the compiler knows,
 /// so the loops unroll and nothing is indexed through run-time lengths.
 /// N's factors are left in `ws.jac`/`ws.piv`, as `factor_n` leaves them,
-/// for the lazy Π (`shake::classical::project`) and Hager's estimate. Without
+/// for the lazy Π (`geoshake::classical::project`) and Hager's estimate. Without
 /// `project`, Π of the new state goes to `show` if given (the same solve).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]

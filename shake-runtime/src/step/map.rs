@@ -4,7 +4,7 @@
 //! buffer the map needs, so that a second one (the reverse check's) runs
 //! beside the first without touching it.
 //!
-//! Two paths compute the same map (to round-off, `tests/fast_paths.rs`):
+//! Two paths compute the same map (to round-off, `tests/suite/fast_paths.rs`):
 //! the general one, a Newton iteration on λ through the base map and the
 //! fibre flow (`crate::shake`), and the classical one for holonomic
 //! constraints, a separable H with constant mass matrix and a
@@ -32,7 +32,7 @@ pub(crate) struct StepMap<B: BaseMap> {
     pub(crate) classical: Option<(f64, f64)>,
     pub(crate) fast_paths: bool,
     /// Whether the fast classical path may use the system's fixed-size
-    /// step (`shake::classical::fixed`, `shake::classical::fixed_m`) when it has one.
+    /// step (`geoshake::classical::fixed`, `geoshake::classical::fixed_m`) when it has one.
     pub(crate) fixed_size: bool,
     /// `ws.jac`/`ws.piv` hold the factors of N at the current state's q
     /// (set by the classical step's check and by `Integrator::begin`).
@@ -44,7 +44,7 @@ pub(crate) struct StepMap<B: BaseMap> {
     /// (`run::record`, which otherwise projects a copy itself).
     pub(crate) show: bool,
     /// Π of the last substep's result, valid when `shown_fresh`: the same
-    /// operations on the same numbers as `shake::classical::project`.
+    /// operations on the same numbers as `geoshake::classical::project`.
     pub(crate) shown: State,
     pub(crate) shown_fresh: bool,
 }

@@ -30,7 +30,7 @@ use crate::system::ConstrainedSystem;
 /// Which map a step is: SHAKE S_h (onto M) or RATTLE R_h = Π ∘ S_h (onto M^H).
 ///
 /// ```
-/// use shake_runtime::{Integrator, ImplicitMidpoint, Method, examples::Pendulum};
+/// use geoshake_runtime::{Integrator, ImplicitMidpoint, Method, examples::Pendulum};
 /// let integ = Integrator::new(Pendulum::default(), ImplicitMidpoint, 0.1).shake();
 /// assert_eq!(integ.method(), Method::Shake);
 /// ```

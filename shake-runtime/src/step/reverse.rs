@@ -20,7 +20,7 @@
 //! finds the nearby solution from the new state, and that one does not
 //! lead back. Near a fold of M^H where N is small, such a jump can keep
 //! det N's sign and λ near its first prediction, so no other check sees it
-//! (`tests/hard_degenerate.rs`, `tests/hard_random_systems.rs`).
+//! (`tests/suite/hard_degenerate.rs`, `tests/suite/hard_random_systems.rs`).
 //!
 //! The step back runs on its own [`StepMap`] (its own workspaces) and a
 //! copy of the guard, so the forward step's state (N at the new state, the

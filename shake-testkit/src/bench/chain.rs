@@ -6,10 +6,10 @@
 //! q = (x₀, y₀, x₁, y₁, …), H = Σ_k |p_k|²/2 + γ y_k,
 //! g₀ = |q₀|² − ℓ², g_k = |q_k − q_{k−1}|² − ℓ² (k ≥ 1). Straight-line loops
 //! that write only the structurally nonzero entries (the contract of
-//! `shake_runtime::system`), and the closed-form fibre flow.
+//! `geoshake_runtime::system`), and the closed-form fibre flow.
 #![allow(dead_code, clippy::needless_range_loop)]
 
-use shake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, State};
+use geoshake::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian, State};
 
 /// The chain of N links, written by hand.
 #[derive(Copy, Clone, Debug, PartialEq)]

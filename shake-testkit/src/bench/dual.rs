@@ -13,8 +13,8 @@
 //! written.
 #![allow(dead_code, clippy::needless_range_loop)]
 
+use geoshake::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 use num_dual::{Dual64, DualNum, HyperDual64};
-use shake::{ConstrainedSystem, ConstraintKind, Hamiltonian};
 use std::cell::RefCell;
 
 /// H and g written once, generically.

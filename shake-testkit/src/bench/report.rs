@@ -61,18 +61,18 @@ pub fn step_cost_tables(groups: &[&str]) {
         println!("|---|---:|---:|---:|---:|---:|");
         for g in groups {
             let hand = median(g, &format!("{method}/hand"));
-            let gen = median(g, &format!("{method}/generated"));
+            let generated = median(g, &format!("{method}/generated"));
             let dual = median(g, &format!("{method}/num-dual"));
-            if hand.is_none() && gen.is_none() {
+            if hand.is_none() && generated.is_none() {
                 continue;
             }
             println!(
                 "| {g} | {} | {} | {} | {} | {} |",
                 cell(hand),
-                cell(gen),
+                cell(generated),
                 cell(dual),
-                ratio(gen, hand),
-                ratio(dual, gen)
+                ratio(generated, hand),
+                ratio(dual, generated)
             );
         }
     }

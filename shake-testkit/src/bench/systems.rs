@@ -1,15 +1,15 @@
 //! The benchmark scenes, each three ways: declared with
-//! `constrained_system!` (the pendulums and Hopf from `shake::models`, the
-//! chains below), written by hand (`shake_testkit::models` and
+//! `constrained_system!` (the pendulums and Hopf from `geoshake::models`, the
+//! chains below), written by hand (`geoshake_testkit::models` and
 //! `chain.rs`), and written once generically for num-dual (`dual.rs`).
 #![allow(dead_code, clippy::needless_range_loop)]
 
 use super::dual::Generic;
+use geoshake::{constrained_system, ConstraintKind};
 use num_dual::DualNum;
-use shake::{constrained_system, ConstraintKind};
 
 // ---------------------------------------------------------------------------
-// Chains declared with the macro (the pattern of shake::models::Chain8).
+// Chains declared with the macro (the pattern of geoshake::models::Chain8).
 // ---------------------------------------------------------------------------
 
 macro_rules! chain {
@@ -56,7 +56,7 @@ impl Generic for PendulumG {
     const CONSTRAINTS: usize = 1;
     const KIND: ConstraintKind = ConstraintKind::Holonomic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] = shake::models::Pendulum::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] = geoshake::models::Pendulum::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         (p[0] * p[0] + p[1] * p[1]) * c::<T>(0.5) + q[1] * c::<T>(self.gravity)
     }
@@ -77,7 +77,8 @@ impl Generic for SphericalG {
     const CONSTRAINTS: usize = 1;
     const KIND: ConstraintKind = ConstraintKind::Holonomic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] = shake::models::SphericalPendulum::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] =
+        geoshake::models::SphericalPendulum::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]) * c::<T>(0.5) + q[2] * c::<T>(self.gravity)
     }
@@ -99,7 +100,7 @@ impl Generic for HopfG {
     const CONSTRAINTS: usize = 1;
     const KIND: ConstraintKind = ConstraintKind::Quadratic;
     const SEPARABLE: bool = true;
-    const PATTERN: &'static [(usize, usize)] = shake::models::HopfGravity::JACOBIAN_PATTERN;
+    const PATTERN: &'static [(usize, usize)] = geoshake::models::HopfGravity::JACOBIAN_PATTERN;
     fn h<T: DualNum<Primitive = f64> + Copy>(&self, q: &[T], p: &[T]) -> T {
         (p[0] * p[0] + p[1] * p[1]) * c::<T>(0.5)
             - q[0] * c::<T>(self.gravity[0])

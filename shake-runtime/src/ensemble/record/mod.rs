@@ -21,7 +21,7 @@ const DIAGNOSTIC_WORDS: usize = 10;
 /// buffer or file; a record written by this crate always reads back).
 ///
 /// ```
-/// use shake_runtime::ensemble::{unpack_outcome, RecordError};
+/// use geoshake_runtime::ensemble::{unpack_outcome, RecordError};
 /// assert!(matches!(unpack_outcome(&[1, 2, 3]), Err(RecordError::BadTag { .. })));
 /// ```
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -62,8 +62,8 @@ pub enum RecordError {
 /// one place that knows how a [`RunOutcome`] is laid out in memory.
 ///
 /// ```
-/// use shake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
-/// use shake_runtime::ensemble::{pack_outcome, unpack_outcome};
+/// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+/// use geoshake_runtime::ensemble::{pack_outcome, unpack_outcome};
 /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1).rattle();
 /// let out = integ.run(Pendulum::default().state(0.5, 0.0), Stop::Steps(3)).execute();
 /// let mut words = Vec::new();
@@ -123,8 +123,8 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
 /// the member index, the outcome, and the number of words used.
 ///
 /// ```
-/// use shake_runtime::{RunOutcome, Trajectory, StepError};
-/// use shake_runtime::ensemble::{pack_outcome, unpack_outcome, RecordError};
+/// use geoshake_runtime::{RunOutcome, Trajectory, StepError};
+/// use geoshake_runtime::ensemble::{pack_outcome, unpack_outcome, RecordError};
 /// let failed = RunOutcome {
 ///     trajectory: Trajectory::default(),
 ///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0, entry: 0 }),

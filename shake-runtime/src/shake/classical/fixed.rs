@@ -5,7 +5,7 @@
 //!
 //! The map is the slice path's (the parent module): the same kick, the
 //! same Newton iteration on λ and the same Π, so it gives the same steps
-//! to round-off (`tests/fast_paths.rs`; the same bits for a constraint of
+//! to round-off (`tests/suite/fast_paths.rs`; the same bits for a constraint of
 //! degree ≤ 2, [`ConstrainedSystem::quadratic_constraints`], whose first
 //! iterate both paths take as the root of g's exact quadratic along
 //! SHAKE's line, `quadratic_root`). What differs is where the numbers
@@ -20,7 +20,7 @@
 
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
-use crate::newton::NewtonOptions;
+use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::shake::{ShakeReport, Workspace};
 use crate::state::State;
 use crate::system::ConstrainedSystem;
@@ -177,12 +177,9 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
     let (mut r, mut u, mut dq, mut q1) = residual(sys, h, &q0, &p0, &kick, &g0, None);
     let mut lambda = 0.0f64;
     let mut lambda_first = 0.0f64;
-    let mut iterations = 0;
+    let mut mon = Monitor::new(*opts);
     let mut fresh = true;
-    let mut prev = f64::INFINITY;
-    let mut refreshed = false;
     let mut inv_j = f64::NAN;
-    let mut lambda_noise = 0.0;
     let mut r_first = 0.0;
     let not_finite =
         |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
@@ -194,56 +191,60 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
     // its first pass: there it made the step 20 % slower.)
     let g_qq = &ws.classical.g_qq;
     let mut solved = false;
-    if !g_qq.is_empty() && r.is_finite() && r.abs() > floor {
-        if let Some((root, first, r1)) = quadratic_root(sys, h, (&q0, &p0, &g0), &q1, r, g_qq) {
-            r_first = r.abs();
-            inv_j = 1.0 / r1;
-            (lambda, lambda_first, iterations) = (root, first, 1);
-            (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(root));
-            prev = (root - first).abs();
-            fresh = false;
-            solved = r.abs() <= floor && dq.iter().all(|x| x.is_finite());
-        }
+    if !g_qq.is_empty()
+        && r.is_finite()
+        && r.abs() > floor
+        && let Some((root, first, r1)) = quadratic_root(sys, h, (&q0, &p0, &g0), &q1, r, g_qq)
+    {
+        r_first = r.abs();
+        inv_j = 1.0 / r1;
+        (lambda, lambda_first) = (root, first);
+        mon.jump((root - first).abs());
+        (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(root));
+        fresh = false;
+        solved = r.abs() <= floor && dq.iter().all(|x| x.is_finite());
     }
     if !solved {
         loop {
             if !r.is_finite() || !dq.iter().all(|x| x.is_finite()) {
-                return Err(not_finite(iterations));
+                return Err(not_finite(mon.iterations));
             }
-            // At round-off: the confirming update (`shake::classical::shake_step`).
+            // At round-off: the confirming update (`geoshake::classical::shake_step`).
             let at_floor = r == 0.0 || r.abs() <= floor;
-            if at_floor && (r == 0.0 || iterations == 0 || iterations >= opts.max_iterations) {
+            if at_floor && (r == 0.0 || mon.iterations == 0 || mon.exhausted()) {
                 break;
             }
-            if iterations >= opts.max_iterations {
+            if mon.exhausted() {
                 return Err(StepError::from_solve(
                     Stage::Shake,
                     SolveError::NotConverged {
-                        iterations,
+                        iterations: mon.iterations,
                         residual: r.abs(),
                     },
                 ));
             }
-            if iterations == 0 {
+            if mon.iterations == 0 {
                 r_first = r.abs();
                 inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, 0)?;
             }
             let delta = r * inv_j;
             lambda -= delta;
             let (step_size, size) = (delta.abs(), lambda.abs());
-            if iterations == 0 {
+            if mon.iterations == 0 {
                 lambda_first = lambda;
+                // λ's round-off level (`geoshake::classical::shake_step`).
+                mon.set_floor(step_size / r_first * floor);
             }
-            iterations += 1;
+            let verdict = mon.update_frozen(step_size, size, fresh);
             let r0 = r;
             (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(lambda));
             if !(step_size.is_finite() && size.is_finite()) {
-                return Err(not_finite(iterations));
+                return Err(not_finite(mon.iterations));
             }
             if at_floor {
                 break;
             }
-            if iterations == 1 && lambda != 0.0 {
+            if mon.iterations == 1 && lambda != 0.0 {
                 // The small root of r0 + r1 λ + r2 λ², exact for a distance
                 // constraint (parent module).
                 let (l1, r1) = (lambda, 1.0 / inv_j);
@@ -254,33 +255,20 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
                     if root.is_finite() {
                         lambda = root;
                         (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(lambda));
-                        iterations += 1;
-                        prev = (root - l1).abs();
+                        mon.jump((root - l1).abs());
                         fresh = false;
                         continue;
                     }
                 }
             }
-            if iterations == 1 {
-                lambda_noise = step_size / r_first * floor;
-            }
-            let tol = (opts.step_tolerance * size).max(lambda_noise);
-            let theta = step_size / prev;
-            prev = step_size;
-            if step_size <= tol {
-                break;
-            }
-            if theta > 0.5
-                && step_size <= opts.stagnation_threshold * size.max(1.0)
-                && (fresh || refreshed)
-            {
-                break;
-            }
-            fresh = false;
-            if theta > 0.25 {
-                inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, iterations)?;
-                fresh = true;
-                refreshed |= step_size <= opts.stagnation_threshold * size.max(1.0);
+            // The one stopping rule of simplified Newton (`newton`).
+            match verdict {
+                Verdict::Converged => break,
+                Verdict::Continue => fresh = false,
+                Verdict::Refresh => {
+                    inv_j = inverse_jacobian(sys, h, &q0, &p0, &g0, &q1, mon.iterations)?;
+                    fresh = true;
+                }
             }
         }
     }
@@ -309,6 +297,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
             }
         }
     }
+    let iterations = mon.iterations;
     let report = ShakeReport {
         iterations,
         base_iterations: 0,
@@ -359,7 +348,7 @@ pub(crate) fn show<S: ConstrainedSystem, const D: usize>(
 
 /// Π at (q, p) given N = {{H,g},g} there: one solve N σ = {g, H}, then
 /// the kick p ← p − σ G(q)ᵀ (the fibre flow). Returns the new p and σ.
-/// The operations of `shake::classical::project` (the slice path's lazy Π), in
+/// The operations of `geoshake::classical::project` (the slice path's lazy Π), in
 /// its order.
 #[inline(always)]
 pub(crate) fn project<S: ConstrainedSystem, const D: usize>(

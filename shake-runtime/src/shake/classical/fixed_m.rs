@@ -7,7 +7,7 @@
 //! computed with the same operations in the same order (the same kick,
 //! residual, Jacobian from the same list of terms, the same banded LU
 //! kernels, the same stopping rules), so it gives the same steps to the
-//! last bit (`tests/fast_paths.rs`). What moves to the stack is SHAKE's
+//! last bit (`tests/suite/fast_paths.rs`). What moves to the stack is SHAKE's
 //! Newton iteration (λ, r, q1, Δ and the m×m Jacobian), N with its factors,
 //! and Π's σ: arrays whose lengths the compiler knows, so the loops over
 //! them unroll and the generated derivatives inline with their sizes. Both
@@ -16,7 +16,7 @@
 //! O(m) with the recursion in registers). N on the stack (1.90 → 1.83) and
 //! the tridiagonal kernels (→ 1.50–1.53) took a 4-link chain's RATTLE run
 //! to about 1.5 times the hand-written step (BENCHMARKS.md, section 7.5).
-//! `shake-macros`' tests show the macro emits this step for m = 2 to 8.
+//! `geoshake-macros`' tests show the macro emits this step for m = 2 to 8.
 
 use super::{packed_jacobian, Buffers};
 use crate::compensated::kahan_add;
@@ -25,7 +25,7 @@ use crate::linalg::{
     all_finite, band_lu_factor, band_lu_solve, dense_lu_factor, dense_lu_solve,
     full_band_lu_factor, full_band_lu_solve, lu_det, norm_inf, Band,
 };
-use crate::newton::NewtonOptions;
+use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::rattle::{estimate_inverse, FactorN, NondegeneracyCheck};
 use crate::shake::{ShakeReport, Workspace};
 use crate::system::ConstrainedSystem;
@@ -166,7 +166,7 @@ struct Iterate<const D: usize, const M: usize> {
     r: [f64; M],
 }
 
-/// q1(λ) and r(λ) as `shake::classical::residual` computes them (λ = 0 when
+/// q1(λ) and r(λ) as `geoshake::classical::residual` computes them (λ = 0 when
 /// `lambda` is `None`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -206,7 +206,7 @@ fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
 }
 
 /// SHAKE's Jacobian −h G(q1) A G0ᵀ at `q1`, factorised in `jac`/`piv`, as
-/// `shake::classical::jacobian` forms it (the list of terms when A is diagonal,
+/// `geoshake::classical::jacobian` forms it (the list of terms when A is diagonal,
 /// else the column groups through `grad_p`).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -269,7 +269,7 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
     .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }))
 }
 
-/// `shake::classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
+/// `geoshake::classical::shake_step` on the stack: (q, p) becomes z1⁻ in place;
 /// the last λ, its first iterate and the last residual r are left in
 /// `ws.lambda`, `ws.lambda_first` and `ws.g` (on failure too, as the slice
 /// path leaves them), G0 and G at the last Jacobian's q1 packed in
@@ -307,7 +307,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         &mut cl.g0,
     );
     // g's round-off level near q0 and ‖∂g_i/∂z‖₁ at q0, in one pass over
-    // G0 (as the slice path, `shake::classical::shake_step`).
+    // G0 (as the slice path, `geoshake::classical::shake_step`).
     let mut floor = [0.0; M];
     ws.g_size.fill(0.0);
     for (&(i, k), &g) in cl.pattern.iter().zip(&cl.g0) {
@@ -320,35 +320,32 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
     let mut jac = [[0.0; M]; M];
     let mut piv = [0usize; M];
     let band: Band = ws.jac_band;
-    let mut iterations = 0;
+    let mut mon = Monitor::new(*opts);
     let mut fresh = true;
-    let mut prev = f64::INFINITY;
-    let mut refreshed = false;
     let mut need_jacobian = true;
-    let mut lambda_noise = 0.0;
     let mut r_first = 0.0;
     let not_finite =
         |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
     let outcome = loop {
         let r = norm_inf(&it.r);
         if !(r.is_finite() && all_finite(&it.r) && all_finite(&it.dq)) {
-            break Err(not_finite(iterations));
+            break Err(not_finite(mon.iterations));
         }
-        // At round-off: the confirming update (`shake::classical::shake_step`).
+        // At round-off: the confirming update (`geoshake::classical::shake_step`).
         let at_floor = r == 0.0 || it.r.iter().zip(&floor).all(|(g, f)| g.abs() <= *f);
-        if at_floor && (r == 0.0 || need_jacobian || iterations >= opts.max_iterations) {
+        if at_floor && (r == 0.0 || need_jacobian || mon.exhausted()) {
             break Ok(());
         }
-        if iterations >= opts.max_iterations {
+        if mon.exhausted() {
             break Err(StepError::from_solve(
                 Stage::Shake,
                 SolveError::NotConverged {
-                    iterations,
+                    iterations: mon.iterations,
                     residual: r,
                 },
             ));
         }
-        if iterations == 0 {
+        if mon.iterations == 0 {
             r_first = r;
         }
         if need_jacobian {
@@ -369,46 +366,39 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             *l -= dl;
         }
         let (step, size) = (norm_inf(&delta), norm_inf(&lambda));
-        if iterations == 0 {
+        if mon.iterations == 0 {
             lambda_first = lambda;
+            // λ's round-off level (`geoshake::classical::shake_step`).
+            mon.set_floor(step / r_first * norm_inf(&floor));
         }
-        iterations += 1;
+        let verdict = mon.update_frozen(step, size, fresh);
         let cl = &ws.classical;
         it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &cl.g0, &cl.pattern, Some(&lambda));
         if !(step.is_finite() && size.is_finite()) {
-            break Err(not_finite(iterations));
+            break Err(not_finite(mon.iterations));
         }
         if at_floor {
             break Ok(());
         }
-        if iterations == 1 {
-            lambda_noise = step / r_first * norm_inf(&floor);
-        }
-        let tol = (opts.step_tolerance * size).max(lambda_noise);
-        let theta = step / prev;
-        prev = step;
-        if step <= tol {
-            break Ok(());
-        }
-        if theta > 0.5 && step <= opts.stagnation_threshold * size.max(1.0) && (fresh || refreshed)
-        {
-            break Ok(());
-        }
-        fresh = false;
-        if theta > 0.25 {
-            let at = (&mut ws.classical, &mut ws.g_z_1[..], band, ws.groups);
-            let z = (&q0, &p0, &it.q1);
-            if let Err(e) = jacobian(sys, h, z, at, &mut jac, &mut piv, iterations) {
-                break Err(e);
+        // The one stopping rule of simplified Newton (`newton`).
+        match verdict {
+            Verdict::Converged => break Ok(()),
+            Verdict::Continue => fresh = false,
+            Verdict::Refresh => {
+                let at = (&mut ws.classical, &mut ws.g_z_1[..], band, ws.groups);
+                let z = (&q0, &p0, &it.q1);
+                if let Err(e) = jacobian(sys, h, z, at, &mut jac, &mut piv, mon.iterations) {
+                    break Err(e);
+                }
+                fresh = true;
             }
-            fresh = true;
-            refreshed |= step <= opts.stagnation_threshold * size.max(1.0);
         }
     };
     // As the slice path leaves them, whether SHAKE converged or not: the
     // last residual and λ (and λ's first iterate once there was one).
     ws.g.copy_from_slice(&it.r);
     ws.lambda.copy_from_slice(&lambda);
+    let iterations = mon.iterations;
     if iterations > 0 {
         ws.lambda_first.copy_from_slice(&lambda_first);
     }

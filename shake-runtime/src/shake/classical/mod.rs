@@ -27,8 +27,10 @@
 //! taken, with the Jacobian in hand, before the iteration ends (the
 //! confirming update). Stopping without it left the double pendulum's
 //! SHAKE step 67ε from the classical formulas at h = 0.05, against 12ε
-//! with it (`tests/classical_agrees.rs`, the paper's claim 2).
-//! Stagnation at the noise floor with a fresh Jacobian stops it too. It
+//! with it (`tests/suite/classical_agrees.rs`, the paper's claim 2).
+//! Stagnation at the noise floor with a fresh Jacobian stops it too: the
+//! one rule of simplified Newton ([`Monitor::update_frozen`], with λ's
+//! round-off level as its floor), which the general kernel uses too. It
 //! does not stop on the contraction rate alone (θ/(1−θ)‖Δ_k‖ below the
 //! tolerance, Hairer & Wanner, *Solving ODEs II*, IV.8): that too saves
 //! the confirming update and leaves λ off by its size.
@@ -71,7 +73,7 @@ use crate::base_map::BaseMap;
 use crate::compensated::kahan_add;
 use crate::error::{SolveError, Stage, StepError};
 use crate::linalg::{all_finite, band_lu_factor, band_lu_solve, lu_solve, norm_inf, zero_short};
-use crate::newton::NewtonOptions;
+use crate::newton::{Monitor, NewtonOptions, Verdict};
 use crate::shake::{ShakeReport, Workspace};
 use crate::system::{ConstrainedSystem, ConstraintKind};
 
@@ -282,14 +284,9 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     }
     residual(sys, h, ws, true);
     let mut report = ShakeReport::default();
-    let mut iterations = 0;
+    let mut mon = Monitor::new(*opts);
     let mut fresh = true;
-    let mut prev = f64::INFINITY;
-    let mut refreshed = false;
     let mut need_jacobian = true;
-    // The round-off level of λ: the floor of g seen through J⁻¹, whose size
-    // the first update shows (‖Δ₁‖/‖r(0)‖).
-    let mut lambda_noise = 0.0;
     let mut r_first = 0.0;
     let not_finite =
         |iterations| StepError::from_solve(Stage::Shake, SolveError::NonFinite { iterations });
@@ -301,16 +298,17 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     let mut solved = false;
     if m == 1 && !ws.classical.g_qq.is_empty() {
         let (r0, floor) = (ws.g[0], ws.classical.floor[0]);
-        if r0.is_finite() && r0.abs() > floor {
-            if let Some((root, first, r1)) = first_iterate(sys, h, ws) {
-                r_first = r0.abs();
-                (ws.jac[0], ws.piv_j[0], need_jacobian) = (1.0 / r1, 0, false);
-                (ws.lambda[0], ws.lambda_first[0], iterations) = (root, first, 1);
-                residual(sys, h, ws, false);
-                prev = (root - first).abs();
-                fresh = false;
-                solved = ws.g[0].abs() <= floor && all_finite(&ws.dz[..d]);
-            }
+        if r0.is_finite()
+            && r0.abs() > floor
+            && let Some((root, first, r1)) = first_iterate(sys, h, ws)
+        {
+            r_first = r0.abs();
+            (ws.jac[0], ws.piv_j[0], need_jacobian) = (1.0 / r1, 0, false);
+            (ws.lambda[0], ws.lambda_first[0]) = (root, first);
+            mon.jump((root - first).abs());
+            residual(sys, h, ws, false);
+            fresh = false;
+            solved = ws.g[0].abs() <= floor && all_finite(&ws.dz[..d]);
         }
     }
     loop {
@@ -320,7 +318,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
         let r = norm_inf(&ws.g);
         // (norm_inf skips NaN: look at every entry.)
         if !(r.is_finite() && all_finite(&ws.g) && all_finite(&ws.dz[..d])) {
-            return Err(not_finite(iterations));
+            return Err(not_finite(mon.iterations));
         }
         // The residual at round-off: no update can bring q1 closer to M.
         // λ is still off by J⁻¹ r, which the momenta see divided by h, so
@@ -333,19 +331,19 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
                 .iter()
                 .zip(&ws.classical.floor)
                 .all(|(g, f)| g.abs() <= *f);
-        if at_floor && (r == 0.0 || need_jacobian || iterations >= opts.max_iterations) {
+        if at_floor && (r == 0.0 || need_jacobian || mon.exhausted()) {
             break;
         }
-        if iterations >= opts.max_iterations {
+        if mon.exhausted() {
             return Err(StepError::from_solve(
                 Stage::Shake,
                 SolveError::NotConverged {
-                    iterations,
+                    iterations: mon.iterations,
                     residual: r,
                 },
             ));
         }
-        if iterations == 0 {
+        if mon.iterations == 0 {
             r_first = r;
         }
         if need_jacobian {
@@ -359,19 +357,22 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
             *l -= dl;
         }
         let (step, size) = (norm_inf(&ws.delta), norm_inf(&ws.lambda));
-        if iterations == 0 {
+        if mon.iterations == 0 {
             ws.lambda_first.copy_from_slice(&ws.lambda);
+            // The round-off level of λ: the floor of g seen through J⁻¹,
+            // whose size the first update shows (‖Δ₁‖/‖r(0)‖).
+            mon.set_floor(step / r_first * norm_inf(&ws.classical.floor));
         }
-        iterations += 1;
+        let verdict = mon.update_frozen(step, size, fresh);
         let r0 = ws.g[0];
         residual(sys, h, ws, false);
         if !(step.is_finite() && size.is_finite()) {
-            return Err(not_finite(iterations));
+            return Err(not_finite(mon.iterations));
         }
         if at_floor {
             break;
         }
-        if m == 1 && iterations == 1 && ws.lambda[0] != 0.0 {
+        if m == 1 && mon.iterations == 1 && ws.lambda[0] != 0.0 {
             // One constraint: r(λ) along the line q1(λ) is a quadratic
             // r0 + r1 λ + r2 λ² when g is (a distance constraint), with
             // r1 = J(0) and r2 = r(λ1)/λ1² from the first iterate λ1. Its
@@ -387,36 +388,22 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
                 if root.is_finite() {
                     ws.lambda[0] = root;
                     residual(sys, h, ws, false);
-                    iterations += 1;
-                    prev = (root - l1).abs();
+                    mon.jump((root - l1).abs());
                     fresh = false;
                     continue;
                 }
             }
         }
-        if iterations == 1 {
-            lambda_noise = step / r_first * norm_inf(&ws.classical.floor);
-        }
-        let tol = (opts.step_tolerance * size).max(lambda_noise);
-        let theta = step / prev;
-        prev = step;
-        // An update at round-off (not a contraction that only predicts
-        // the next one would be: module docs).
-        if step <= tol {
-            break;
-        }
-        // The noise floor, seen with a Jacobian of this iterate (or after
-        // one has already brought the updates there).
-        if theta > 0.5 && step <= opts.stagnation_threshold * size.max(1.0) && (fresh || refreshed)
-        {
-            break;
-        }
-        fresh = false;
-        if theta > 0.25 {
-            // Slow for the simplified iteration: a Jacobian at this iterate.
-            jacobian(sys, h, ws, iterations)?;
-            fresh = true;
-            refreshed |= step <= opts.stagnation_threshold * size.max(1.0);
+        // The one stopping rule of simplified Newton (`newton`): an update
+        // at round-off or the noise floor ends it; a slow contraction asks
+        // for a Jacobian at this iterate.
+        match verdict {
+            Verdict::Converged => break,
+            Verdict::Continue => fresh = false,
+            Verdict::Refresh => {
+                jacobian(sys, h, ws, mon.iterations)?;
+                fresh = true;
+            }
         }
     }
     // p1 − p0 = u − b h ∇V(q1), each part a small quantity.
@@ -445,9 +432,9 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
             }
         }
     }
-    report.iterations = iterations;
+    report.iterations = mon.iterations;
     report.lambda = norm_inf(&ws.lambda);
-    if iterations > 0 {
+    if mon.iterations > 0 {
         report.lambda_predicted = norm_inf(&ws.lambda_first);
         report.lambda_correction = ws
             .lambda

@@ -53,7 +53,7 @@ pub(crate) struct Buffers {
 
 impl Buffers {
     /// For `sys`, whose SHAKE Jacobian has the band `band` and is
-    /// evaluated in `groups` column groups (`shake::Workspace`).
+    /// evaluated in `groups` column groups (`geoshake::Workspace`).
     pub(crate) fn new<S: ConstrainedSystem>(sys: &S, band: Band, groups: usize) -> Self {
         let (d, m) = (sys.dof(), sys.constraint_count());
         let pattern: Vec<(usize, usize)> = sys

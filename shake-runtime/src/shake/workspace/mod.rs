@@ -77,7 +77,7 @@ pub(crate) struct Workspace {
 #[derive(Clone, Debug)]
 pub(crate) struct NBuffers {
     /// N, as the system writes it (the slice path's; the fixed-size step
-    /// of 2 to 8 constraints reads N on the stack, `shake::classical::fixed_m`).
+    /// of 2 to 8 constraints reads N on the stack, `geoshake::classical::fixed_m`).
     pub(crate) mat: Vec<f64>,
     /// N at the previous checked state (the fold indicator of
     /// `Guard::check_n` compares the two); zero outside N's band.

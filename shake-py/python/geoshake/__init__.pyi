@@ -1,0 +1,24 @@
+from ._geoshake import (
+    ComponentJumpError as ComponentJumpError,
+    DeclarationError as DeclarationError,
+    FibreJumpError as FibreJumpError,
+    InvalidInputError as InvalidInputError,
+    NewtonError as NewtonError,
+    NondegeneracyError as NondegeneracyError,
+    NonFiniteError as NonFiniteError,
+    NotOnConstraintError as NotOnConstraintError,
+    ParameterError as ParameterError,
+    Result as Result,
+    ShakeError as ShakeError,
+    System as System,
+    declare as declare,
+    ensemble as ensemble,
+    run as run,
+)
+from . import models as models
+import numpy as np
+import numpy.typing as npt
+from typing import Any
+
+def rattle(system: System, z0: npt.NDArray[np.float64], h: float, **kwargs: Any) -> Result: ...
+def shake(system: System, z0: npt.NDArray[np.float64], h: float, **kwargs: Any) -> Result: ...

@@ -1,0 +1,108 @@
+"""Type stubs of the Rust extension ``geoshake._geoshake``."""
+
+from typing import Literal, Optional, Union
+
+import numpy as np
+import numpy.typing as npt
+
+Base = Literal["midpoint", "verlet", "euler"]
+Method = Literal["rattle", "shake"]
+
+class ShakeError(Exception):
+    """Every error of shake. A run's errors carry the step, time and
+    residual (NaN when the error has none) and the partial trajectory."""
+
+    step: int
+    time: float
+    residual: float
+    trajectory: npt.NDArray[np.float64]
+    times: npt.NDArray[np.float64]
+    steps: npt.NDArray[np.uint64]
+    lambda_: npt.NDArray[np.float64]
+    sigma: npt.NDArray[np.float64]
+
+class DeclarationError(ShakeError):
+    """A declaration refused, with the macro's message and its position."""
+
+    message: str
+    line: int
+    column: int
+
+class ParameterError(ShakeError): ...
+class InvalidInputError(ShakeError): ...
+class NonFiniteError(ShakeError): ...
+class NewtonError(ShakeError): ...
+class NondegeneracyError(ShakeError): ...
+class ComponentJumpError(ShakeError): ...
+class FibreJumpError(ShakeError): ...
+class NotOnConstraintError(ShakeError): ...
+
+class System:
+    """A constrained Hamiltonian system, declared or compiled."""
+
+    @property
+    def dof(self) -> int: ...
+    @property
+    def constraint_count(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def kind(self) -> Literal["none", "holonomic", "quadratic", "general"]: ...
+    @property
+    def compiled(self) -> bool: ...
+    @property
+    def parameters(self) -> dict[str, float]: ...
+    @property
+    def constraint_names(self) -> list[str]: ...
+    @property
+    def variable_names(self) -> list[str]: ...
+    def hamiltonian(self, z: npt.ArrayLike) -> float: ...
+    def constraints(self, z: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+    def hidden_constraints(self, z: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+
+class Result:
+    """A run: states (n, 2d), times (n,), steps (n,), λ and σ (n, m)."""
+
+    trajectory: npt.NDArray[np.float64]
+    times: npt.NDArray[np.float64]
+    steps: npt.NDArray[np.uint64]
+    lambda_: npt.NDArray[np.float64]
+    sigma: npt.NDArray[np.float64]
+    def __len__(self) -> int: ...
+
+def declare(source: str, **parameters: float) -> System: ...
+def model(name: str, **parameters: float) -> System: ...
+def model_names() -> list[tuple[str, list[str]]]: ...
+def run(
+    system: System,
+    z0: npt.ArrayLike,
+    h: float,
+    *,
+    steps: Optional[int] = None,
+    time: Optional[float] = None,
+    method: Method = "rattle",
+    base: Base = "midpoint",
+    stride: int = 1,
+    project: bool = True,
+    multipliers: bool = True,
+    constraint_tolerance: Optional[float] = None,
+    newton_tolerance: Optional[float] = None,
+    max_iterations: Optional[int] = None,
+) -> Result: ...
+def ensemble(
+    system: System,
+    z0s: npt.ArrayLike,
+    h: float,
+    *,
+    steps: Optional[int] = None,
+    time: Optional[float] = None,
+    method: Method = "rattle",
+    base: Base = "midpoint",
+    stride: int = 1,
+    project: bool = True,
+    multipliers: bool = True,
+    constraint_tolerance: Optional[float] = None,
+    newton_tolerance: Optional[float] = None,
+    max_iterations: Optional[int] = None,
+    errors: Literal["raise", "return"] = "raise",
+) -> list[Union[Result, ShakeError]]: ...
