@@ -20,7 +20,10 @@
 //!   autocorrelation of the M chains and var⁺ = (n − 1)/n W + B/n. The
 //!   bulk ESS is that of the rank-normalised split chains; the ESS of the
 //!   mean (for a Monte Carlo standard error, sd/√ESS) is that of the split
-//!   chains themselves.
+//!   chains themselves. τ is kept at least 1/log₁₀(S) (S = M n), so the
+//!   ESS of antithetic chains is at most S·log₁₀(S); chains so antithetic
+//!   that 1 + ρ̂₁ ≤ 0 (Geyer's sum has no first pair) get that cap, as in
+//!   ArviZ.
 //!
 //! Chains of unequal length are cut to the shortest. Fewer than four
 //! draws per chain (ten for an ESS: Geyer's sequence needs a pair of lags
@@ -233,6 +236,15 @@ fn ess(chains: &[Vec<f64>]) -> f64 {
         }
         t += 2;
     }
+    let total = m * nf;
+    // τ ≥ 1/log₁₀(S) caps the ESS of antithetic chains at S·log₁₀(S).
+    let cap = 1.0 / total.log10();
+    if t == 1 {
+        // The loop never ran: 1 + ρ̂₁ ≤ 0 (antithetic chains), and no pair
+        // of lags enters τ. ArviZ's sum is then over no pair, plus ρ̂₀ = 1
+        // as the last term: τ = −1 + 1 = 0, capped like any small τ.
+        return total / cap;
+    }
     let max_t = t - 2;
     if even > 0.0 {
         rho_hat[max_t + 1] = even;
@@ -246,10 +258,8 @@ fn ess(chains: &[Vec<f64>]) -> f64 {
         }
         t += 2;
     }
-    let total = m * nf;
     let tau = -1.0 + 2.0 * rho_hat[..=max_t].iter().sum::<f64>() + rho_hat[max_t + 1];
-    // τ ≥ 1/log₁₀(S) caps the ESS of antithetic chains at S·log₁₀(S).
-    total / tau.max(1.0 / total.log10())
+    total / tau.max(cap)
 }
 
 /// The unbiased variance of a few numbers.
@@ -439,6 +449,23 @@ mod tests {
         let flat = vec![vec![1.0; 100]; 2];
         assert!(ess_mean(&flat).is_nan() && rhat(&flat).is_nan());
         assert!(ess_bulk(&[[1.0, 2.0, 3.0]]).is_nan());
+    }
+
+    /// Exactly alternating chains have ρ̂₁ ≤ −1, so Geyer's loop never
+    /// runs (its first pair sum 1 + ρ̂₁ is not positive): τ = 0 as in
+    /// ArviZ, and the ESS is the cap S·log₁₀(S), not a panic.
+    #[test]
+    fn ess_of_exactly_alternating_chains_is_capped() {
+        for (chains, n) in [(1, 20), (2, 20), (4, 64)] {
+            let x: Vec<Vec<f64>> = (0..chains)
+                .map(|_| (0..n).map(|i| if i % 2 == 0 { 1.0 } else { -1.0 }).collect())
+                .collect();
+            let s = (chains * n) as f64;
+            let cap = s * s.log10();
+            for ess in [ess_mean(&x), ess_bulk(&x)] {
+                assert!((ess - cap).abs() <= 1e-12 * cap, "{ess} vs {cap}");
+            }
+        }
     }
 
     /// The three estimators against ArviZ (arviz-stats 0.8:
