@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! sampler target=… dim=… constraints=… chains=… draws=… acceptance=… rejected_reverse=…
-//!   rejected_newton=… ess_per_s=… rhat=… check=pass|fail (then step_size=… seconds=…)
+//!   rejected_newton=… ess_per_s=… rhat=… check=pass|fail (then rejected_nonfinite=…
+//!   rejected_degenerate=… rejected_jump=… step_size=… seconds=…)
 //! ```
 //!
 //! `ess_per_s` is the smallest bulk ESS over the checked expectations
@@ -138,7 +139,7 @@ where
     println!(
         "sampler target={name} dim={} constraints={} chains={} draws={} acceptance={:.3} \
          rejected_reverse={} rejected_newton={} ess_per_s={:.0} rhat={:.4} check={} \
-         rejected_nonfinite={} rejected_degenerate={} step_size={:.3} seconds={:.3}",
+         rejected_nonfinite={} rejected_degenerate={} rejected_jump={} step_size={:.3} seconds={:.3}",
         system.dof(),
         system.constraint_count(),
         opts.chains,
@@ -151,6 +152,7 @@ where
         if pass { "pass" } else { "fail" },
         r.non_finite,
         r.degenerate,
+        r.jump,
         mean_h,
         seconds
     );

@@ -208,9 +208,12 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             return Ok(());
         }
         self.back.clone_from(&self.z);
+        // Whatever stops the step back (its Newton, a degenerate N, a jump)
+        // leaves the forward step not undone: a reversibility failure, not
+        // a failure of the forward trajectory.
         self.backward
             .step_in_place(&mut self.back)
-            .map_err(|e| Rejection::of(&e))?;
+            .map_err(|_| Rejection::Reverse)?;
         let miss = self
             .back
             .q

@@ -19,37 +19,49 @@ use super::convergence::{ess_bulk, ess_mean, rhat};
 pub enum Rejection {
     /// The Metropolis test: u ≥ e^{−ΔH}.
     Metropolis,
-    /// A step is not undone by the step back (R_{−h}(R_h z) misses z by
-    /// more than the reverse tolerance), or one of its Newton solves
-    /// converged to another solution than the nearby one (the engine's
-    /// fibre- and branch-jump checks): the proposal map would not be an
-    /// involution there, and accepting it would bias the chain.
+    /// The step back failed: R_{−h}(R_h z) misses z by more than the
+    /// reverse tolerance, or the step back itself could not be taken (any
+    /// failure of its solves: Newton, a singular or degenerate N, a
+    /// non-finite state, a jump). Either way the forward step is not
+    /// undone, the proposal map would not be an involution there, and
+    /// accepting it would bias the chain. Only the step back gives this
+    /// kind.
     Reverse,
-    /// A Newton solve of a step (forward or back) did not converge, or its
-    /// matrix was singular: no point of M was found for that step.
+    /// A Newton solve of a forward step (or of the projection of the fresh
+    /// momentum) did not converge, or its matrix was singular: no point of
+    /// M was found for that step.
     Newton,
-    /// A state or the energy came out infinite or NaN (a density that is
-    /// zero or undefined along the trajectory, or a step far too large).
+    /// A state or the energy of the forward trajectory came out infinite
+    /// or NaN (a density that is zero or undefined along the trajectory,
+    /// or a step far too large).
     NonFinite,
-    /// N = g_q g_qᵀ is (nearly) singular along the trajectory: the
+    /// N = g_q g_qᵀ is (nearly) singular along the forward trajectory: the
     /// constraints' gradients are (nearly) dependent there, and M is not a
     /// manifold of the expected dimension (the engine's nondegeneracy
     /// checks).
     Degenerate,
+    /// A forward step's solve (or the momentum's projection) converged,
+    /// but the engine's own fibre- or branch-jump check refused the result
+    /// (`StepError::FibreJump`, `StepError::BranchJump`): it is another
+    /// crossing of the fibre with M than the nearby one. The defect the
+    /// step back would find, caught before it is taken; counted apart from
+    /// [`Rejection::Reverse`], which counts what the step back found.
+    Jump,
 }
 
 impl Rejection {
     /// Every kind, in the order of [`RejectionCounts`]' fields.
-    pub const ALL: [Rejection; 5] = [
+    pub const ALL: [Rejection; 6] = [
         Rejection::Metropolis,
         Rejection::Reverse,
         Rejection::Newton,
         Rejection::NonFinite,
         Rejection::Degenerate,
+        Rejection::Jump,
     ];
 
     /// A short lower-case name (`metropolis`, `reverse`, `newton`,
-    /// `non_finite`, `degenerate`), as in the example's output.
+    /// `non_finite`, `degenerate`, `jump`), as in the example's output.
     pub const fn name(self) -> &'static str {
         match self {
             Rejection::Metropolis => "metropolis",
@@ -57,10 +69,12 @@ impl Rejection {
             Rejection::Newton => "newton",
             Rejection::NonFinite => "non_finite",
             Rejection::Degenerate => "degenerate",
+            Rejection::Jump => "jump",
         }
     }
 
-    /// The kind of a step's failure in the engine.
+    /// The kind of a forward step's failure in the engine (a failure of
+    /// the step back is always [`Rejection::Reverse`]).
     ///
     /// ```
     /// use geoshake_runtime::{sampler::Rejection, SolveError, Stage, StepError};
@@ -69,13 +83,17 @@ impl Rejection {
     ///     source: SolveError::NotConverged { iterations: 50, residual: 1e-3 },
     /// };
     /// assert_eq!(Rejection::of(&e), Rejection::Newton);
+    /// let jump = StepError::FibreJump {
+    ///     stage: Stage::Shake, step: 1, t: 0.1, lambda: 0.9, predicted: 0.01,
+    /// };
+    /// assert_eq!(Rejection::of(&jump), Rejection::Jump);
     /// ```
     pub fn of(e: &StepError) -> Rejection {
         match e {
             StepError::NewtonNotConverged { .. }
             | StepError::SingularShakeJacobian { .. }
             | StepError::NotOnConstraint { .. } => Rejection::Newton,
-            StepError::FibreJump { .. } | StepError::BranchJump { .. } => Rejection::Reverse,
+            StepError::FibreJump { .. } | StepError::BranchJump { .. } => Rejection::Jump,
             StepError::NonFinite { .. } => Rejection::NonFinite,
             StepError::SingularNondegeneracyMatrix { .. }
             | StepError::NondegeneracyLost { .. }
@@ -100,7 +118,7 @@ impl Rejection {
 pub struct RejectionCounts {
     /// By the Metropolis test.
     pub metropolis: usize,
-    /// By the reversibility check.
+    /// By the reversibility check: the step back missed, or failed.
     pub reverse: usize,
     /// By a Newton solve that failed.
     pub newton: usize,
@@ -108,6 +126,8 @@ pub struct RejectionCounts {
     pub non_finite: usize,
     /// By a (nearly) singular N.
     pub degenerate: usize,
+    /// By the engine's fibre- or branch-jump check of a forward step.
+    pub jump: usize,
 }
 
 impl RejectionCounts {
@@ -130,6 +150,7 @@ impl RejectionCounts {
             Rejection::Newton => self.newton,
             Rejection::NonFinite => self.non_finite,
             Rejection::Degenerate => self.degenerate,
+            Rejection::Jump => self.jump,
         }
     }
 
@@ -140,6 +161,7 @@ impl RejectionCounts {
             Rejection::Newton => &mut self.newton,
             Rejection::NonFinite => &mut self.non_finite,
             Rejection::Degenerate => &mut self.degenerate,
+            Rejection::Jump => &mut self.jump,
         }
     }
 
@@ -436,8 +458,15 @@ impl fmt::Display for Summary {
             let r = s.rejected;
             writeln!(
                 f,
-                "chain {c}: acceptance {:.3}, h = {:.4e}, rejected metropolis={} reverse={} newton={} non_finite={} degenerate={}",
-                s.acceptance, s.step_size, r.metropolis, r.reverse, r.newton, r.non_finite, r.degenerate
+                "chain {c}: acceptance {:.3}, h = {:.4e}, rejected metropolis={} reverse={} newton={} non_finite={} degenerate={} jump={}",
+                s.acceptance,
+                s.step_size,
+                r.metropolis,
+                r.reverse,
+                r.newton,
+                r.non_finite,
+                r.degenerate,
+                r.jump
             )?;
         }
         for w in self.warnings() {

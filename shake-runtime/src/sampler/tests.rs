@@ -229,3 +229,42 @@ fn draws_lie_on_m_and_statistics_agree() {
     assert!(summary.acceptance() > 0.5, "{summary}");
     assert!(summary.max_rhat() < 1.1, "{summary}");
 }
+
+/// `reverse` counts what the step back found, and only that: the engine's
+/// own jump checks of a forward step (or of the momentum's projection)
+/// are the kind `jump`, its other failures keep their kinds.
+#[test]
+fn forward_failures_are_not_counted_as_reverse() {
+    use crate::{SolveError, Stage, StepError};
+    let fibre = StepError::FibreJump {
+        stage: Stage::Shake,
+        step: 1,
+        t: 0.1,
+        lambda: 0.9,
+        predicted: 0.01,
+    };
+    let branch = StepError::BranchJump {
+        step: 1,
+        t: 0.1,
+        miss: Some(0.3),
+        tolerance: 1e-8,
+        cause: None,
+    };
+    let newton = StepError::NewtonNotConverged {
+        stage: Stage::Shake,
+        step: 1,
+        t: 0.1,
+        source: SolveError::NotConverged {
+            iterations: 50,
+            residual: 1e-3,
+        },
+    };
+    assert_eq!(Rejection::of(&fibre), Rejection::Jump);
+    assert_eq!(Rejection::of(&branch), Rejection::Jump);
+    assert_eq!(Rejection::of(&newton), Rejection::Newton);
+    let mut counts = RejectionCounts::default();
+    for e in [&fibre, &branch, &newton] {
+        counts.add(Rejection::of(e));
+    }
+    assert_eq!((counts.reverse, counts.jump, counts.newton), (0, 2, 1));
+}
