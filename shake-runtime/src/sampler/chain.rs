@@ -28,7 +28,8 @@ pub(crate) struct Transition {
     pub(crate) accepted: bool,
     /// min(1, e^{−ΔH}), 0 when a check rejected the proposal.
     pub(crate) alpha: f64,
-    /// H of the state kept.
+    /// H of the state kept; NaN when the fresh momentum could not be
+    /// projected (there is no state on T*M to give an energy).
     pub(crate) energy: f64,
     /// Forward steps taken.
     pub(crate) steps: usize,

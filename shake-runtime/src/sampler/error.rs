@@ -16,7 +16,7 @@ use crate::error::{human, sci, StepError};
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SamplerError {
     /// An option is outside its domain: no chains, no draws, no
-    /// integration steps, a step size that is not positive and finite, a
+    /// integration steps, a step size that is not in (0, 10⁶], a
     /// target acceptance outside (0, 1), a reverse tolerance that is not
     /// positive.
     #[error("invalid sampler option `{what}` = {}: {why}", human(*.value))]

@@ -105,6 +105,11 @@ use crate::system::ConstrainedSystem;
 
 use chain::Chain;
 
+/// The largest step size accepted: far beyond any usable step on a
+/// manifold of any sensible scale, and small enough that the adaptation's
+/// μ = log(10 h₀) and the engine's times stay finite.
+const MAX_STEP_SIZE: f64 = 1e6;
+
 /// The settings of a sampler run.
 ///
 /// ```
@@ -123,7 +128,8 @@ pub struct SamplerOptions {
     /// L, the RATTLE steps of one transition (default 10).
     pub steps: usize,
     /// h: the step size, the starting value of the adaptation when there
-    /// is one (default 0.1).
+    /// is one (default 0.1); positive and at most 10⁶ (so that the
+    /// adaptation's log(10 h) and every step's t + h stay finite).
     pub step_size: f64,
     /// Each transition draws its step size uniformly from
     /// h·[1 − j, 1 + j] with j this (default 0, in [0, 1)): a trajectory
@@ -181,8 +187,8 @@ impl SamplerOptions {
         if self.steps == 0 {
             return invalid("steps", 0.0, "at least one RATTLE step per transition");
         }
-        if !(self.step_size > 0.0 && self.step_size.is_finite()) {
-            return invalid("step_size", self.step_size, "positive and finite");
+        if !(self.step_size > 0.0 && self.step_size <= MAX_STEP_SIZE) {
+            return invalid("step_size", self.step_size, "positive and at most 1e6");
         }
         if !(0.0..1.0).contains(&self.step_size_jitter) {
             return invalid("step_size_jitter", self.step_size_jitter, "in [0, 1)");

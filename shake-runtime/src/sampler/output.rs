@@ -196,9 +196,11 @@ pub struct Samples {
     /// The Metropolis acceptance probability min(1, e^{−ΔH}) of the
     /// proposal (0 when a check rejected it).
     pub acceptance_probability: Vec<f64>,
-    /// H(q, p) of the state the transition kept (the proposal if accepted,
-    /// else the start with its fresh momentum; NaN when the momentum could
-    /// not be projected).
+    /// H(q, p) of the state the transition kept: the proposal if accepted,
+    /// else the start with its fresh momentum. NaN when that momentum
+    /// could not be projected onto T*_q M (Π failed: the transition is a
+    /// `newton`, `degenerate` or `jump` rejection with 0 steps, and there is
+    /// no momentum to give an energy); skip NaN entries when averaging.
     pub energy: Vec<f64>,
     /// RATTLE steps taken forward (L, or fewer when a step failed).
     pub steps: Vec<usize>,
@@ -209,17 +211,24 @@ pub struct Samples {
 }
 
 impl Samples {
-    /// Draw `i` of chain `c`.
+    /// Draw `i` of chain `c`; `None` when `c ≥ chains` or `i ≥ draws` (an
+    /// index past a chain's end would otherwise read the next chain).
     ///
     /// ```
     /// # use geoshake_runtime::sampler::{sample, SamplerOptions};
     /// # use geoshake_runtime::examples::Pendulum;
     /// let opts = SamplerOptions { chains: 2, draws: 5, warmup: 0, ..Default::default() };
     /// let s = sample(&Pendulum { gravity: 0.0, length: 1.0 }, &[[1.0, 0.0]], &opts).unwrap();
-    /// let q = s.draw(1, 4);
+    /// let q = s.draw(1, 4).unwrap();
     /// assert!((q[0] * q[0] + q[1] * q[1] - 1.0).abs() < 1e-12);
+    /// assert!(s.draw(0, 5).is_none() && s.draw(2, 0).is_none());
     /// ```
-    pub fn draw(&self, c: usize, i: usize) -> &[f64] {
+    pub fn draw(&self, c: usize, i: usize) -> Option<&[f64]> {
+        (c < self.chains && i < self.draws).then(|| self.draw_at(c, i))
+    }
+
+    /// Draw `i` of chain `c`, both in range.
+    fn draw_at(&self, c: usize, i: usize) -> &[f64] {
         let at = (c * self.draws + i) * self.dim;
         &self.positions[at..at + self.dim]
     }
@@ -237,7 +246,7 @@ impl Samples {
     /// ```
     pub fn series(&self, f: impl Fn(&[f64]) -> f64) -> Vec<Vec<f64>> {
         (0..self.chains)
-            .map(|c| (0..self.draws).map(|i| f(self.draw(c, i))).collect())
+            .map(|c| (0..self.draws).map(|i| f(self.draw_at(c, i))).collect())
             .collect()
     }
 

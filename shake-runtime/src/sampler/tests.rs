@@ -27,10 +27,25 @@ fn small(draws: usize) -> SamplerOptions {
 #[test]
 fn bad_options_are_typed_errors() {
     let start = [[1.0, 0.0]];
-    let cases: [(SamplerOptions, &str); 7] = [
+    let cases: [(SamplerOptions, &str); 9] = [
         (
             SamplerOptions {
                 step_size: 0.0,
+                ..small(10)
+            },
+            "step_size",
+        ),
+        // Finite, but log(10 h₀) of the adaptation would be +∞.
+        (
+            SamplerOptions {
+                step_size: f64::MAX,
+                ..small(10)
+            },
+            "step_size",
+        ),
+        (
+            SamplerOptions {
+                step_size: f64::INFINITY,
                 ..small(10)
             },
             "step_size",
