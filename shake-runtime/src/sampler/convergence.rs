@@ -25,6 +25,9 @@
 //!   that 1 + ρ̂₁ ≤ 0 (Geyer's sum has no first pair) get that cap, as in
 //!   ArviZ.
 //!
+//! - The tail ESS is the smaller ESS of the indicators I(x ≤ q₀.₀₅) and
+//!   I(x ≤ q₀.₉₅) of the split chains.
+//!
 //! Chains of unequal length are cut to the shortest. Fewer than four
 //! draws per chain (ten for an ESS: Geyer's sequence needs a pair of lags
 //! in each half), or chains that are all constant, give NaN.
@@ -102,6 +105,52 @@ pub fn ess_mean<C: AsRef<[f64]>>(chains: &[C]) -> f64 {
     match split_chains(chains) {
         Some(split) => ess(&split),
         None => f64::NAN,
+    }
+}
+
+/// The tail effective sample size (Vehtari et al. 2021): the smaller ESS
+/// of the indicators I(x ≤ q₀.₀₅) and I(x ≤ q₀.₉₅) over the split chains,
+/// q_p the pooled draws' p-quantile (linear interpolation, NumPy's
+/// default, as ArviZ): how well the chains explore the tails, where the
+/// 5 % and 95 % quantiles of an interval are estimated.
+///
+/// ```
+/// use geoshake_runtime::sampler::ess_tail;
+/// let a: Vec<f64> = (0..200).map(|i| (i as f64 * 0.618_033_988_75).fract()).collect();
+/// let b: Vec<f64> = a.iter().rev().copied().collect();
+/// let ess = ess_tail(&[&a, &b]);
+/// assert!(ess > 100.0, "{ess}");
+/// ```
+pub fn ess_tail<C: AsRef<[f64]>>(chains: &[C]) -> f64 {
+    let Some(split) = split_chains(chains) else {
+        return f64::NAN;
+    };
+    // The quantiles of the chains as given (cut to the shortest), as
+    // ArviZ: the split drops an odd n's middle draw, the quantile keeps it.
+    let n = chains.iter().map(|c| c.as_ref().len()).min().unwrap_or(0);
+    let mut pooled: Vec<f64> = chains
+        .iter()
+        .flat_map(|c| c.as_ref()[..n].iter().copied())
+        .collect();
+    pooled.sort_by(f64::total_cmp);
+    let quantile = |p: f64| {
+        let h = (pooled.len() - 1) as f64 * p;
+        let lo = h.floor() as usize;
+        let hi = (lo + 1).min(pooled.len() - 1);
+        pooled[lo] + (h - lo as f64) * (pooled[hi] - pooled[lo])
+    };
+    let below = |q: f64| -> Vec<Vec<f64>> {
+        split
+            .iter()
+            .map(|c| c.iter().map(|&x| if x <= q { 1.0 } else { 0.0 }).collect())
+            .collect()
+    };
+    let lower = ess(&below(quantile(0.05)));
+    let upper = ess(&below(quantile(0.95)));
+    if lower.is_nan() || upper.is_nan() {
+        f64::NAN
+    } else {
+        lower.min(upper)
     }
 }
 

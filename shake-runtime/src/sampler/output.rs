@@ -5,7 +5,7 @@ use std::fmt;
 
 use crate::error::StepError;
 
-use super::convergence::{ess_bulk, ess_mean, rhat};
+use super::convergence::{ess_bulk, ess_mean, ess_tail, rhat};
 
 /// Why a proposal was rejected. Every failure of a transition is one of
 /// these, counted, and the chain stays where it was; none is an error of
@@ -327,6 +327,8 @@ pub struct Estimate {
     pub ess_mean: f64,
     /// The bulk ESS ([`ess_bulk`]).
     pub ess_bulk: f64,
+    /// The tail ESS ([`ess_tail`]).
+    pub ess_tail: f64,
     /// The rank-normalised split-R̂ ([`rhat`]).
     pub rhat: f64,
 }
@@ -345,6 +347,7 @@ impl Estimate {
             mcse: sd / ess_mean.sqrt(),
             ess_mean,
             ess_bulk: ess_bulk(chains),
+            ess_tail: ess_tail(chains),
             rhat: rhat(chains),
         }
     }
@@ -365,8 +368,8 @@ pub struct ChainSummary {
 }
 
 /// A run at a glance: [`Estimate`] per coordinate, [`ChainSummary`] per
-/// chain. Its `Display` is a small table, with a line for every chain
-/// that rejected everything.
+/// chain. Its `Display` is a small table, then its
+/// [warnings](Summary::warnings).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Summary {
     /// Per coordinate q_k.
@@ -422,11 +425,47 @@ impl Summary {
         total
     }
 
-    /// What a user must know: chains that rejected everything, and R̂
-    /// above 1.01 (Vehtari et al.'s threshold).
+    /// What a user must know, with Vehtari et al.'s (2021) thresholds:
+    ///
+    /// - a chain that accepted no proposal (its draws are its start), or
+    ///   fewer than [`Summary::MIN_ACCEPTANCE`] = 1 % of them (it hardly
+    ///   moves: h is far too large, or the start is in a trap);
+    /// - a coordinate whose R̂ is above [`Summary::MAX_RHAT`] = 1.01, or
+    ///   NaN (chains that each stayed constant, at different values);
+    /// - a coordinate whose bulk or tail ESS is below
+    ///   [`Summary::MIN_ESS_PER_CHAIN`] = 100 per chain: below that R̂ and
+    ///   the Monte Carlo standard errors themselves are not reliable.
+    ///
+    /// A coordinate constant over every draw of every chain is skipped: it
+    /// is fixed on M (a sphere's coordinate of a flat family, a pinned
+    /// entry), and its NaN R̂ and ESS say nothing about mixing; a chain
+    /// stuck at its start is reported by the acceptance line instead.
+    ///
+    /// ```
+    /// use geoshake_runtime::sampler::{ChainSummary, Estimate, RejectionCounts, Summary};
+    /// let chain = |acceptance: f64| ChainSummary {
+    ///     acceptance, step_size: 0.1, rejected: RejectionCounts::default(), all_rejected: false,
+    /// };
+    /// let mixed = Estimate { mean: 0.0, sd: 1.0, mcse: 0.02, ess_mean: 2500.0, ess_bulk: 2500.0, ess_tail: 2000.0, rhat: 1.001 };
+    /// let fixed = Estimate { mean: 1.0, sd: 0.0, mcse: f64::NAN, ess_mean: f64::NAN, ess_bulk: f64::NAN, ess_tail: f64::NAN, rhat: f64::NAN };
+    /// let ok = Summary { coordinates: vec![mixed, fixed], chains: vec![chain(0.8), chain(0.7)] };
+    /// assert!(ok.warnings().is_empty());
+    /// let slow = Summary { chains: vec![chain(0.8), chain(0.005)], ..ok.clone() };
+    /// assert!(slow.warnings()[0].contains("chain 1 accepted 0.5 %"));
+    /// let short = Estimate { ess_tail: 150.0, ..mixed };
+    /// let few = Summary { coordinates: vec![short], ..ok };
+    /// assert!(few.warnings()[0].contains("tail ESS"));
+    /// ```
     pub fn warnings(&self) -> Vec<String> {
         let mut out = Vec::new();
         for (c, s) in self.chains.iter().enumerate() {
+            if !s.all_rejected && s.acceptance < Self::MIN_ACCEPTANCE {
+                out.push(format!(
+                    "chain {c} accepted {:.1} % of its proposals with h = {:e}: it hardly moves",
+                    100.0 * s.acceptance,
+                    s.step_size
+                ));
+            }
             if s.all_rejected {
                 let worst = Rejection::ALL
                     .into_iter()
@@ -440,27 +479,51 @@ impl Summary {
                 ));
             }
         }
-        let r = self.max_rhat();
-        if !(r <= 1.01) {
-            out.push(format!(
-                "R̂ = {r:.3} > 1.01: the chains have not mixed; run longer"
-            ));
+        let min_ess = Self::MIN_ESS_PER_CHAIN * self.chains.len() as f64;
+        for (k, e) in self.coordinates.iter().enumerate() {
+            if e.sd == 0.0 {
+                continue;
+            }
+            if !(e.rhat <= Self::MAX_RHAT) {
+                out.push(format!(
+                    "q[{k}]: R̂ = {:.3} > {}: the chains have not mixed; run longer",
+                    e.rhat,
+                    Self::MAX_RHAT
+                ));
+            }
+            for (what, ess) in [("bulk", e.ess_bulk), ("tail", e.ess_tail)] {
+                if !(ess >= min_ess) {
+                    out.push(format!(
+                        "q[{k}]: {what} ESS = {ess:.0} < {min_ess:.0} ({} per chain): too few to trust R̂ and the standard errors; run longer",
+                        Self::MIN_ESS_PER_CHAIN
+                    ));
+                }
+            }
         }
         out
     }
+
+    /// R̂ above this is a warning (Vehtari et al. 2021).
+    pub const MAX_RHAT: f64 = 1.01;
+    /// A chain accepting less than this fraction of its proposals is a
+    /// warning.
+    pub const MIN_ACCEPTANCE: f64 = 0.01;
+    /// A bulk or tail ESS below this many per chain is a warning (Vehtari
+    /// et al. 2021: 100 per chain, 400 for four chains).
+    pub const MIN_ESS_PER_CHAIN: f64 = 100.0;
 }
 
 impl fmt::Display for Summary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
             f,
-            "coordinate       mean         sd       mcse   ess_bulk   rhat"
+            "coordinate       mean         sd       mcse   ess_bulk   ess_tail   rhat"
         )?;
         for (k, e) in self.coordinates.iter().enumerate() {
             writeln!(
                 f,
-                "q[{k:<3}]   {:>11.5} {:>10.5} {:>10.2e} {:>10.0} {:>6.3}",
-                e.mean, e.sd, e.mcse, e.ess_bulk, e.rhat
+                "q[{k:<3}]   {:>11.5} {:>10.5} {:>10.2e} {:>10.0} {:>10.0} {:>6.3}",
+                e.mean, e.sd, e.mcse, e.ess_bulk, e.ess_tail, e.rhat
             )?;
         }
         for (c, s) in self.chains.iter().enumerate() {
