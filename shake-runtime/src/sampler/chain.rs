@@ -16,7 +16,6 @@ use crate::base_map::StormerVerlet;
 use crate::integrator::Integrator;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
-use crate::tolerance::max_abs;
 
 use super::adapt::DualAveraging;
 use super::output::Rejection;
@@ -199,7 +198,9 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
     /// M) the step back lands elsewhere, and accepting would break detailed
     /// balance (Zappa, Holmes-Cerfon and Goodman 2018; Lelièvre, Rousset
     /// and Stoltz 2019). The test is symmetric: a trajectory passes it
-    /// exactly when its reversal does, so rejecting is itself reversible.
+    /// when its reversal does, to round-off and away from the limit of the
+    /// conditions (a miss at the tolerance, a solve at the edge of
+    /// convergence), so rejecting is itself reversible to that precision.
     fn checked_step(&mut self) -> Result<(), Rejection> {
         self.before.clone_from(&self.z);
         self.forward
@@ -215,23 +216,75 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         self.backward
             .step_in_place(&mut self.back)
             .map_err(|_| Rejection::Reverse)?;
-        let miss = self
-            .back
-            .q
-            .iter()
-            .chain(self.back.p.iter())
-            .zip(self.before.q.iter().chain(self.before.p.iter()))
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        // Relative to the states' size, as the engine's own reverse check
-        // of composed steps: a step back on the same branch returns to
-        // round-off times the conditioning of its solves (1e-14 here), a
-        // branch jump misses by the distance between two crossings.
-        let scale = max_abs(self.before.q.as_slice(), self.before.p.as_slice())
-            .max(max_abs(self.z.q.as_slice(), self.z.p.as_slice()));
-        if miss <= self.reverse_tolerance * scale {
+        if reverse_ok(
+            self.before.q.as_slice(),
+            self.z.q.as_slice(),
+            self.back.q.as_slice(),
+            self.reverse_tolerance,
+        ) {
             Ok(())
         } else {
             Err(Rejection::Reverse)
         }
+    }
+}
+
+/// The reversibility test of one step q₀ → q₁ whose step back landed at
+/// q_back: positions only (as mici), against the step's own length,
+///
+///   ‖q_back − q₀‖∞ ≤ tol · (‖q₁ − q₀‖∞ + ε·max(‖q₀‖∞, ‖q₁‖∞)), ε = 1e-4.
+///
+/// Positions only: for RATTLE the momenta are functions of the two
+/// positions (p_{1/2} = (q₁ − q₀)/h, then a linear projection with a unique
+/// solution where N is invertible), so a step back that returns to q₀
+/// returns p₀ too, and a p miss cannot be read against a q scale. The
+/// step's length as the scale: a step back on the same branch misses by
+/// round-off times the conditioning of its solves, a jump to another
+/// crossing of the fibre by a distance comparable to the step itself, and
+/// neither changes when M is translated. The ε term is a round-off floor
+/// only (round-off is relative to the coordinates' size): it matters for a
+/// step shorter than 1e-4 of ‖q‖, where a correct step back may miss by
+/// more than tol times the step.
+pub(crate) fn reverse_ok(q0: &[f64], q1: &[f64], back: &[f64], tol: f64) -> bool {
+    // (f64::max drops a NaN; this keeps it, so that a NaN fails.)
+    let dist = |a: &[f64], b: &[f64]| {
+        a.iter().zip(b).fold(0.0f64, |m, (x, y)| {
+            let d = (x - y).abs();
+            if d.is_nan() || d > m { d } else { m }
+        })
+    };
+    let size = |a: &[f64]| a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let scale = dist(q1, q0) + ROUND_OFF_FLOOR * size(q0).max(size(q1));
+    // (NaN anywhere fails the test.)
+    dist(back, q0) <= tol * scale
+}
+
+/// ε of [`reverse_ok`].
+const ROUND_OFF_FLOOR: f64 = 1e-4;
+
+#[cfg(test)]
+mod tests {
+    use super::reverse_ok;
+
+    /// The test reads positions against the step's length: the same step
+    /// and miss pass or fail alike wherever M lies (the round-off floor
+    /// aside, which only widens the test far from the origin).
+    #[test]
+    fn the_reverse_test_is_translation_invariant() {
+        let tol = 1e-8;
+        let (step, good, jump) = (0.1, 1e-14, 1e-3);
+        for shift in [0.0, 1.0, 1e3, 1e6] {
+            let q0 = [shift, 0.0];
+            let q1 = [shift + step, 0.0];
+            // A step back on the same branch: round-off (shift + 1e-14
+            // rounds to a neighbour of shift at most an ulp away).
+            let near = [shift + good, 0.0];
+            assert!(reverse_ok(&q0, &q1, &near, tol), "shift {shift}");
+            // A miss of 1e-3 on a step of 0.1 is a branch jump anywhere
+            // (a test relative to ‖z‖∞ would pass it from ‖q‖ ≈ 1e5).
+            let far = [shift + jump, 0.0];
+            assert!(!reverse_ok(&q0, &q1, &far, tol), "shift {shift}");
+        }
+        assert!(!reverse_ok(&[0.0], &[0.1], &[f64::NAN], tol));
     }
 }

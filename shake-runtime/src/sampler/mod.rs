@@ -43,17 +43,22 @@
 //!    ([`Integrator::step_in_place`](crate::Integrator::step_in_place)), each
 //!    followed by the **reversibility check**: the step back R_{−h} (for H
 //!    even in p, the step from the end with negated momentum) must return
-//!    to where the step started within `reverse_tolerance` times the
-//!    states' size, and every Newton solve of both must converge. A step
+//!    to the step's start position within `reverse_tolerance` times the
+//!    step's length (positions only; see
+//!    [`SamplerOptions::reverse_tolerance`]), and every Newton solve of
+//!    both must converge. A step
 //!    whose solve found another solution than the nearby one is not undone
 //!    by the step back; accepting it would bias the chain.
 //! 3. The Metropolis test: accept the end point with probability
 //!    min(1, e^{H(z₀) − H(z_L)}); otherwise q stays.
 //!
 //! The proposal ρ ∘ R_h^L (ρ negates p) is a volume-preserving involution
-//! where the checks pass, and they pass for a trajectory exactly when they
-//! pass for its reversal, so the chain satisfies detailed balance with
-//! respect to e^{−H}; p is drawn afresh at every transition, so ρ itself
+//! where the checks pass, and they pass for a trajectory when they pass
+//! for its reversal (to round-off, and away from the limit of the
+//! conditions: a miss within round-off of the tolerance, or a solve at the
+//! edge of convergence, may be judged differently in the two directions),
+//! so the chain satisfies detailed balance with respect to e^{−H} to that
+//! precision; p is drawn afresh at every transition, so ρ itself
 //! need not be applied. A failed check or solve is a counted rejection
 //! ([`Rejection`]), never an error of the run.
 //!
@@ -141,9 +146,14 @@ pub struct SamplerOptions {
     /// The mean acceptance probability that warm-up adapts h to (default
     /// `Some(0.8)`); `None` keeps h.
     pub target_acceptance: Option<f64>,
-    /// A step is rejected when its step back misses its start by more than
-    /// this times max(‖z₀‖∞, ‖z₁‖∞) (default 1e-8; steps that follow the
-    /// nearby branch miss by about 1e-14, a branch jump by O(1)).
+    /// A step q₀ → q₁ is rejected when its step back misses q₀ by more
+    /// than this times ‖q₁ − q₀‖∞ + 10⁻⁴·max(‖q₀‖∞, ‖q₁‖∞) (default 1e-8):
+    /// positions only, as mici (RATTLE's momenta are functions of the two
+    /// positions), against the step's own length, so that translating M
+    /// changes nothing; the second term is a floor for round-off, which is
+    /// relative to the coordinates. Steps that follow the nearby branch
+    /// miss by round-off times the conditioning of the solves (about 1e-14
+    /// of ‖q‖), a branch jump by a fraction of the step.
     /// `f64::INFINITY` turns the check off, and its step back with it:
     /// half the cost, and a biased chain wherever a solve can jump.
     pub reverse_tolerance: f64,
