@@ -250,7 +250,11 @@ pub(crate) fn reverse_ok(q0: &[f64], q1: &[f64], back: &[f64], tol: f64) -> bool
     let dist = |a: &[f64], b: &[f64]| {
         a.iter().zip(b).fold(0.0f64, |m, (x, y)| {
             let d = (x - y).abs();
-            if d.is_nan() || d > m { d } else { m }
+            if d.is_nan() || d > m {
+                d
+            } else {
+                m
+            }
         })
     };
     let size = |a: &[f64]| a.iter().fold(0.0f64, |m, x| m.max(x.abs()));

@@ -507,7 +507,11 @@ mod tests {
     fn ess_of_exactly_alternating_chains_is_capped() {
         for (chains, n) in [(1, 20), (2, 20), (4, 64)] {
             let x: Vec<Vec<f64>> = (0..chains)
-                .map(|_| (0..n).map(|i| if i % 2 == 0 { 1.0 } else { -1.0 }).collect())
+                .map(|_| {
+                    (0..n)
+                        .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+                        .collect()
+                })
                 .collect();
             let s = (chains * n) as f64;
             let cap = s * s.log10();

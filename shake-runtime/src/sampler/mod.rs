@@ -203,10 +203,10 @@ impl SamplerOptions {
         if !(0.0..1.0).contains(&self.step_size_jitter) {
             return invalid("step_size_jitter", self.step_size_jitter, "in [0, 1)");
         }
-        if let Some(t) = self.target_acceptance {
-            if !(t > 0.0 && t < 1.0) {
-                return invalid("target_acceptance", t, "strictly between 0 and 1");
-            }
+        if let Some(t) = self.target_acceptance
+            && !(t > 0.0 && t < 1.0)
+        {
+            return invalid("target_acceptance", t, "strictly between 0 and 1");
         }
         if !(self.reverse_tolerance > 0.0) {
             return invalid(
