@@ -1,5 +1,5 @@
 //! What the reverse check of composed steps costs (`Options::reverse_tolerance`,
-//! BENCHMARKS.md section 7.2):
+//! BENCHMARKS.md section 7.1):
 //!
 //!     cargo run --release --example reverse_check_cost
 //!

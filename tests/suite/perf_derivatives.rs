@@ -13,7 +13,7 @@
 //!
 //! Counted through `step_in_place`. Runs take the same SHAKE step in
 //! increment form with Kahan's carry, so the counts hold for runs too
-//! (BENCHMARKS.md, section 4).
+//! (BENCHMARKS.md, section 4.1).
 //!
 //! Run with `--nocapture` to see the table of counts.
 

@@ -72,7 +72,7 @@ pub struct Options {
     /// its first prediction (Section 5.4.2; `tests/suite/hard_degenerate.rs`).
     /// It makes a composed step 1.8–3.4 times as costly (the step back,
     /// and in a lazily projected run Π of the start; BENCHMARKS.md,
-    /// section 7.2); `f64::INFINITY` turns it off. Single steps are not
+    /// section 7.1); `f64::INFINITY` turns it off. Single steps are not
     /// checked this way.
     pub reverse_tolerance: f64,
 }

@@ -162,7 +162,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// [`compensated`](crate::compensated)); the carry is reset at the start
     /// of every run. On by default: with it the round-off part of the
     /// energy error grows like √n (Brouwer's law), without it like n — the
-    /// stress example measures both (the README has the numbers). A single
+    /// stress example measures both (docs/guide/beyond.md has the numbers). A single
     /// [`step`](Self::step) has no carry and takes the plain SHAKE step
     /// either way.
     ///

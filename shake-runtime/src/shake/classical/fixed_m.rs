@@ -13,9 +13,9 @@
 //! them unroll and the generated derivatives inline with their sizes. Both
 //! matrices are factorised in their band, as the slice path does: a
 //! chain's are tridiagonal from three links on (`linalg::tridiagonal`,
-//! O(m) with the recursion in registers). N on the stack (1.90 → 1.83) and
-//! the tridiagonal kernels (→ 1.50–1.53) took a 4-link chain's RATTLE run
-//! to about 1.5 times the hand-written step (BENCHMARKS.md, section 7.5).
+//! O(m) with the recursion in registers). N on the stack and the
+//! tridiagonal kernels bring a 4-link chain's RATTLE run to about 1.5 times
+//! the hand-written step (BENCHMARKS.md, section 7).
 //! `geoshake-macros`' tests show the macro emits this step for m = 2 to 8.
 
 use super::{packed_jacobian, Buffers};
