@@ -101,6 +101,7 @@ pub mod progress;
 pub mod rattle;
 pub mod report;
 pub mod run;
+pub mod sampler;
 mod shake;
 pub mod solver;
 mod state;

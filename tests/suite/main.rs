@@ -54,6 +54,7 @@ mod runtime_invariants;
 mod runtime_models;
 mod runtime_proptest;
 mod runtime_symplectic;
+mod sampler;
 mod scale_invariance;
 mod trajectory_csv;
 mod ui;

@@ -1,0 +1,294 @@
+//! One chain: the transition kernel and its warm-up.
+//!
+//! The chain holds two integrators over Störmer–Verlet, one stepping with
+//! h and one with −h, so that the forward one keeps the engine's cache of
+//! its last checked state: from the second step of a trajectory on,
+//! `step_in_place` resumes from it instead of checking the start and
+//! factorising N there again. The step back starts from the forward
+//! step's result, never from its own last one, and so always checks its
+//! start afresh: one such check per step, whichever integrator pays it.
+
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
+
+use crate::base_map::StormerVerlet;
+use crate::integrator::Integrator;
+use crate::state::State;
+use crate::system::ConstrainedSystem;
+
+use super::adapt::DualAveraging;
+use super::output::Rejection;
+use super::SamplerOptions;
+
+/// What one transition did.
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct Transition {
+    pub(crate) accepted: bool,
+    /// min(1, e^{−ΔH}), 0 when a check rejected the proposal.
+    pub(crate) alpha: f64,
+    /// H of the state kept; NaN when the fresh momentum could not be
+    /// projected (there is no state on T*M to give an energy).
+    pub(crate) energy: f64,
+    /// Forward steps taken.
+    pub(crate) steps: usize,
+    pub(crate) rejection: Option<Rejection>,
+}
+
+/// The draws of one chain, in the layout of `Samples` (draw-major).
+pub(crate) struct ChainOutput {
+    pub(crate) positions: Vec<f64>,
+    pub(crate) transitions: Vec<Transition>,
+    pub(crate) step_size: f64,
+}
+
+pub(crate) struct Chain<S: ConstrainedSystem> {
+    forward: Integrator<S, StormerVerlet>,
+    backward: Integrator<S, StormerVerlet>,
+    rng: ChaCha8Rng,
+    steps: usize,
+    jitter: f64,
+    reverse_tolerance: f64,
+    /// The chain's position (on M) with the momentum of the transition.
+    current: State,
+    /// The moving state of the trajectory.
+    z: State,
+    /// The state before the step being taken, for the reverse check.
+    before: State,
+    /// The step back from z.
+    back: State,
+}
+
+impl<S: ConstrainedSystem + Clone> Chain<S> {
+    /// A chain from q0 (checked on M by the caller), on stream `chain` of
+    /// the generator seeded with `seed`: the chain's draws depend on
+    /// (seed, chain) only, not on which thread runs it or when.
+    pub(crate) fn new(
+        system: &S,
+        q0: &[f64],
+        seed: u64,
+        chain: usize,
+        opts: &SamplerOptions,
+    ) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(chain as u64);
+        let d = system.dof();
+        let mut current = State::zeros(d);
+        current.q.as_mut_slice().copy_from_slice(q0);
+        Chain {
+            forward: Integrator::new(system.clone(), StormerVerlet, opts.step_size).rattle(),
+            backward: Integrator::new(system.clone(), StormerVerlet, -opts.step_size).rattle(),
+            rng,
+            steps: opts.steps,
+            jitter: opts.step_size_jitter,
+            reverse_tolerance: opts.reverse_tolerance,
+            current,
+            z: State::zeros(d),
+            before: State::zeros(d),
+            back: State::zeros(d),
+        }
+    }
+
+    /// Warm-up (with dual averaging when asked), then the draws.
+    pub(crate) fn run(mut self, opts: &SamplerOptions) -> ChainOutput {
+        let mut h = opts.step_size;
+        if let Some(target) = opts.target_acceptance {
+            let mut da = DualAveraging::new(h, target);
+            for _ in 0..opts.warmup {
+                let t = self.transition(da.step_size());
+                da.update(t.alpha);
+            }
+            if opts.warmup > 0 {
+                h = da.final_step_size();
+            }
+        } else {
+            for _ in 0..opts.warmup {
+                self.transition(h);
+            }
+        }
+        let d = self.current.q.len();
+        let mut positions = Vec::with_capacity(opts.draws * d);
+        let mut transitions = Vec::with_capacity(opts.draws);
+        for _ in 0..opts.draws {
+            transitions.push(self.transition(h));
+            positions.extend_from_slice(self.current.q.as_slice());
+        }
+        ChainOutput {
+            positions,
+            transitions,
+            step_size: h,
+        }
+    }
+
+    /// One transition of constrained HMC with step size h (jittered when
+    /// asked): a fresh momentum
+    /// p ~ N(0, I) projected onto T*_q M, L RATTLE steps each checked by
+    /// its step back, the Metropolis test on ΔH.
+    pub(crate) fn transition(&mut self, h: f64) -> Transition {
+        let h = if self.jitter > 0.0 {
+            let u: f64 = self.rng.random();
+            h * (1.0 + self.jitter * (2.0 * u - 1.0))
+        } else {
+            h
+        };
+        for p in self.current.p.iter_mut() {
+            *p = self.rng.sample(StandardNormal);
+        }
+        // Π along the fibre p ↦ p − g_qᵀσ onto {g_q p = 0}: for
+        // H = |p|²/2 + U the orthogonal projection onto the tangent space,
+        // which turns N(0, I) into the standard normal on T*_q M.
+        let reject = |kind: Rejection, energy: f64, steps: usize| Transition {
+            accepted: false,
+            alpha: 0.0,
+            energy,
+            steps,
+            rejection: Some(kind),
+        };
+        match self.forward.project(&self.current) {
+            Ok(z) => self.current = z,
+            Err(e) => return reject(Rejection::of(&e), f64::NAN, 0),
+        }
+        let sys = self.forward.system();
+        let h0 = sys.hamiltonian(self.current.q.as_slice(), self.current.p.as_slice());
+        if !h0.is_finite() {
+            return reject(Rejection::NonFinite, h0, 0);
+        }
+        self.z.clone_from(&self.current);
+        self.forward.with_step_size(h);
+        self.backward.with_step_size(-h);
+        for k in 0..self.steps {
+            if let Err(kind) = self.checked_step() {
+                return reject(kind, h0, k);
+            }
+        }
+        let sys = self.forward.system();
+        let h1 = sys.hamiltonian(self.z.q.as_slice(), self.z.p.as_slice());
+        if !h1.is_finite() {
+            return reject(Rejection::NonFinite, h0, self.steps);
+        }
+        let alpha = (h0 - h1).exp().min(1.0);
+        let u: f64 = self.rng.random();
+        if u < alpha {
+            self.current.clone_from(&self.z);
+            Transition {
+                accepted: true,
+                alpha,
+                energy: h1,
+                steps: self.steps,
+                rejection: None,
+            }
+        } else {
+            Transition {
+                accepted: false,
+                alpha,
+                energy: h0,
+                steps: self.steps,
+                rejection: Some(Rejection::Metropolis),
+            }
+        }
+    }
+
+    /// z ← R_h(z), accepted only if R_{−h} takes the result back to z.
+    ///
+    /// For H even in p, R_{−h} = ρ ∘ R_h ∘ ρ with ρ(q, p) = (q, −p): the
+    /// step back is the forward step from the end with negated momentum.
+    /// A proposal is an involution ρ ∘ R_h^L only where each solve found
+    /// the solution the step back finds again; elsewhere (a Newton
+    /// iteration that converged to another intersection of the fibre with
+    /// M) the step back lands elsewhere, and accepting would break detailed
+    /// balance (Zappa, Holmes-Cerfon and Goodman 2018; Lelièvre, Rousset
+    /// and Stoltz 2019). The test is symmetric: a trajectory passes it
+    /// when its reversal does, to round-off and away from the limit of the
+    /// conditions (a miss at the tolerance, a solve at the edge of
+    /// convergence), so rejecting is itself reversible to that precision.
+    fn checked_step(&mut self) -> Result<(), Rejection> {
+        self.before.clone_from(&self.z);
+        self.forward
+            .step_in_place(&mut self.z)
+            .map_err(|e| Rejection::of(&e))?;
+        if !self.reverse_tolerance.is_finite() {
+            return Ok(());
+        }
+        self.back.clone_from(&self.z);
+        // Whatever stops the step back (its Newton, a degenerate N, a jump)
+        // leaves the forward step not undone: a reversibility failure, not
+        // a failure of the forward trajectory.
+        self.backward
+            .step_in_place(&mut self.back)
+            .map_err(|_| Rejection::Reverse)?;
+        if reverse_ok(
+            self.before.q.as_slice(),
+            self.z.q.as_slice(),
+            self.back.q.as_slice(),
+            self.reverse_tolerance,
+        ) {
+            Ok(())
+        } else {
+            Err(Rejection::Reverse)
+        }
+    }
+}
+
+/// The reversibility test of one step q₀ → q₁ whose step back landed at
+/// q_back: positions only (as mici), against the step's own length,
+///
+///   ‖q_back − q₀‖∞ ≤ tol · (‖q₁ − q₀‖∞ + ε·max(‖q₀‖∞, ‖q₁‖∞)), ε = 1e-4.
+///
+/// Positions only: for RATTLE the momenta are functions of the two
+/// positions (p_{1/2} = (q₁ − q₀)/h, then a linear projection with a unique
+/// solution where N is invertible), so a step back that returns to q₀
+/// returns p₀ too, and a p miss cannot be read against a q scale. The
+/// step's length as the scale: a step back on the same branch misses by
+/// round-off times the conditioning of its solves, a jump to another
+/// crossing of the fibre by a distance comparable to the step itself, and
+/// neither changes when M is translated. The ε term is a round-off floor
+/// only (round-off is relative to the coordinates' size): it matters for a
+/// step shorter than 1e-4 of ‖q‖, where a correct step back may miss by
+/// more than tol times the step.
+pub(crate) fn reverse_ok(q0: &[f64], q1: &[f64], back: &[f64], tol: f64) -> bool {
+    // (f64::max drops a NaN; this keeps it, so that a NaN fails.)
+    let dist = |a: &[f64], b: &[f64]| {
+        a.iter().zip(b).fold(0.0f64, |m, (x, y)| {
+            let d = (x - y).abs();
+            if d.is_nan() || d > m {
+                d
+            } else {
+                m
+            }
+        })
+    };
+    let size = |a: &[f64]| a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let scale = dist(q1, q0) + ROUND_OFF_FLOOR * size(q0).max(size(q1));
+    // (NaN anywhere fails the test.)
+    dist(back, q0) <= tol * scale
+}
+
+/// ε of [`reverse_ok`].
+const ROUND_OFF_FLOOR: f64 = 1e-4;
+
+#[cfg(test)]
+mod tests {
+    use super::reverse_ok;
+
+    /// The test reads positions against the step's length: the same step
+    /// and miss pass or fail alike wherever M lies (the round-off floor
+    /// aside, which only widens the test far from the origin).
+    #[test]
+    fn the_reverse_test_is_translation_invariant() {
+        let tol = 1e-8;
+        let (step, good, jump) = (0.1, 1e-14, 1e-3);
+        for shift in [0.0, 1.0, 1e3, 1e6] {
+            let q0 = [shift, 0.0];
+            let q1 = [shift + step, 0.0];
+            // A step back on the same branch: round-off (shift + 1e-14
+            // rounds to a neighbour of shift at most an ulp away).
+            let near = [shift + good, 0.0];
+            assert!(reverse_ok(&q0, &q1, &near, tol), "shift {shift}");
+            // A miss of 1e-3 on a step of 0.1 is a branch jump anywhere
+            // (a test relative to ‖z‖∞ would pass it from ‖q‖ ≈ 1e5).
+            let far = [shift + jump, 0.0];
+            assert!(!reverse_ok(&q0, &q1, &far, tol), "shift {shift}");
+        }
+        assert!(!reverse_ok(&[0.0], &[0.1], &[f64::NAN], tol));
+    }
+}

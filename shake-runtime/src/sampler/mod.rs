@@ -1,0 +1,375 @@
+//! Constrained Hamiltonian Monte Carlo on M = {q : g(q) = 0}: RATTLE
+//! steps of this crate's engine, a reversibility check and a Metropolis
+//! test (Brubaker, Salzmann and Urtasun 2012; Zappa, Holmes-Cerfon and
+//! Goodman 2018; Lelièvre, Rousset and Stoltz 2019; Graham and Storkey's
+//! mici).
+//!
+//! # The target
+//!
+//! A density π(q) on the submanifold M ⊂ R^d of codimension m, with
+//! respect to the Hausdorff (surface) measure σ_M, given through the
+//! potential U = −log π: the system is H(q, p) = ½|p|² + U(q) (an identity
+//! mass) with holonomic constraints g(q), declared with
+//! `constrained_system!` like any other. The sampler checks that form
+//! before it starts ([`SamplerError::UnsupportedSystem`]).
+//!
+//! Why the draws have density π with respect to σ_M, and no Gram
+//! determinant enters: RATTLE over Störmer–Verlet is a symplectic map of
+//! T*M (the paper's Section 4) and so preserves its Liouville measure,
+//! which for the metric M inherits from R^d is σ_M(dq) times the Lebesgue
+//! measure of the (d − m)-dimensional fibre T*_q M ≅ T_q M. The Gaussian
+//! factor e^{−|p|²/2} integrates over every fibre to the same
+//! (2π)^{(d−m)/2}, so the q-marginal of e^{−H} is e^{−U} σ_M = π σ_M.
+//!
+//! **No Gram-determinant correction is applied.** It is needed for another
+//! target: when π is a density on R^d and the intended distribution is
+//! that of q given g(q) = 0 (the co-area formula), its density with
+//! respect to σ_M is π(q)/√det(g_q g_qᵀ). That is mici's
+//! `dens_wrt_hausdorff = False`, which adds ½ log det(g_q g_qᵀ) to U; this
+//! sampler is mici's `dens_wrt_hausdorff = True`. To sample the
+//! conditional, declare U + ½ log det(g_q g_qᵀ) as the potential (for a
+//! sphere |q|² − r², a product of circles, or SO(3) as RᵀR − I, the Gram
+//! matrix is constant on M and the two targets coincide).
+//!
+//! # One transition
+//!
+//! From q ∈ M, with step size h and L steps:
+//!
+//! 1. p ~ N(0, I_d), then Π: p ← p − g_qᵀ(g_q g_qᵀ)⁻¹ g_q p, RATTLE's own
+//!    projection onto M^H ([`Integrator::project`](crate::Integrator::project)),
+//!    which for this H is the orthogonal projection onto T_q M: p is then
+//!    standard normal on the fibre.
+//! 2. L RATTLE steps z ← R_h(z) over Störmer–Verlet
+//!    ([`Integrator::step_in_place`](crate::Integrator::step_in_place)), each
+//!    followed by the **reversibility check**: the step back R_{−h} (for H
+//!    even in p, the step from the end with negated momentum) must return
+//!    to the step's start position within `reverse_tolerance` times the
+//!    step's length (positions only; see
+//!    [`SamplerOptions::reverse_tolerance`]), and every Newton solve of
+//!    both must converge. A step
+//!    whose solve found another solution than the nearby one is not undone
+//!    by the step back; accepting it would bias the chain.
+//! 3. The Metropolis test: accept the end point with probability
+//!    min(1, e^{H(z₀) − H(z_L)}); otherwise q stays.
+//!
+//! The proposal ρ ∘ R_h^L (ρ negates p) is a volume-preserving involution
+//! where the checks pass, and they pass for a trajectory when they pass
+//! for its reversal (to round-off, and away from the limit of the
+//! conditions: a miss within round-off of the tolerance, or a solve at the
+//! edge of convergence, may be judged differently in the two directions),
+//! so the chain satisfies detailed balance with respect to e^{−H} to that
+//! precision; p is drawn afresh at every transition, so ρ itself
+//! need not be applied. A failed check or solve is a counted rejection
+//! ([`Rejection`]), never an error of the run.
+//!
+//! # Warm-up, chains, output
+//!
+//! Warm-up adapts h by dual averaging (Hoffman and Gelman 2014) towards
+//! [`SamplerOptions::target_acceptance`]; its draws are dropped. Chains
+//! run in parallel on rayon's pool (install a pool to choose the number of
+//! threads, as for [`ensemble`](crate::ensemble())); each draws from its
+//! own stream (`chain`) of a ChaCha8 generator seeded with
+//! [`SamplerOptions::seed`], so its draws are bit for bit the same
+//! whatever the number of threads. [`Samples`] holds the draws as a
+//! (chains, draws, dim) array with per-draw statistics;
+//! [`Samples::summary`] gives the rank-normalised split-R̂ and bulk ESS of
+//! Vehtari et al. (2021) ([`rhat`], [`ess_bulk`]).
+//!
+//! ```
+//! use geoshake_runtime::examples::Pendulum;
+//! use geoshake_runtime::sampler::{sample, Estimate, SamplerOptions};
+//!
+//! // Without gravity U = 0: the uniform distribution on the unit circle,
+//! // where E[x²] = 1/2.
+//! let circle = Pendulum { gravity: 0.0, length: 1.0 };
+//! let opts = SamplerOptions { chains: 2, draws: 500, warmup: 200, seed: 7, ..Default::default() };
+//! let samples = sample(&circle, &[[1.0, 0.0]], &opts)?;
+//! let x2 = Estimate::of(&samples.series(|q| q[0] * q[0]));
+//! assert!((x2.mean - 0.5).abs() < 5.0 * x2.mcse);
+//! let summary = samples.summary();
+//! assert!(summary.max_rhat() < 1.05, "{summary}");
+//! # Ok::<(), geoshake_runtime::sampler::SamplerError>(())
+//! ```
+
+mod adapt;
+mod chain;
+mod convergence;
+mod error;
+mod output;
+
+pub use convergence::{ess_bulk, ess_mean, ess_tail, rhat};
+pub use error::SamplerError;
+pub use output::{ChainSummary, Estimate, Rejection, RejectionCounts, Samples, Summary};
+
+use rayon::prelude::*;
+
+use crate::base_map::StormerVerlet;
+use crate::integrator::Integrator;
+use crate::state::State;
+use crate::system::ConstrainedSystem;
+
+use chain::Chain;
+
+/// The largest step size accepted: far beyond any usable step on a
+/// manifold of any sensible scale, and small enough that the adaptation's
+/// μ = log(10 h₀) and the engine's times stay finite.
+const MAX_STEP_SIZE: f64 = 1e6;
+
+/// The settings of a sampler run.
+///
+/// ```
+/// use geoshake_runtime::sampler::SamplerOptions;
+/// let opts = SamplerOptions { steps: 20, ..SamplerOptions::default() };
+/// assert_eq!((opts.chains, opts.draws, opts.target_acceptance), (4, 1000, Some(0.8)));
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct SamplerOptions {
+    /// Number of chains (default 4).
+    pub chains: usize,
+    /// Draws kept per chain, after warm-up (default 1000).
+    pub draws: usize,
+    /// Warm-up transitions per chain, dropped (default 1000).
+    pub warmup: usize,
+    /// L, the RATTLE steps of one transition (default 10).
+    pub steps: usize,
+    /// h: the step size, the starting value of the adaptation when there
+    /// is one (default 0.1); positive and at most 10⁶ (so that the
+    /// adaptation's log(10 h) and every step's t + h stay finite).
+    pub step_size: f64,
+    /// Each transition draws its step size uniformly from
+    /// h·[1 − j, 1 + j] with j this (default 0, in [0, 1)): a trajectory
+    /// length L·h that matches a period of the dynamics (an oscillation
+    /// about a mode) takes the chain back near its start, and a random
+    /// length breaks that resonance. A mixture of kernels that each keep
+    /// the target keeps it too.
+    pub step_size_jitter: f64,
+    /// The mean acceptance probability that warm-up adapts h to (default
+    /// `Some(0.8)`); `None` keeps h.
+    pub target_acceptance: Option<f64>,
+    /// A step q₀ → q₁ is rejected when its step back misses q₀ by more
+    /// than this times ‖q₁ − q₀‖∞ + 10⁻⁴·max(‖q₀‖∞, ‖q₁‖∞) (default 1e-8):
+    /// positions only, as mici (RATTLE's momenta are functions of the two
+    /// positions), against the step's own length, so that translating M
+    /// changes nothing; the second term is a floor for round-off, which is
+    /// relative to the coordinates. Steps that follow the nearby branch
+    /// miss by round-off times the conditioning of the solves (about 1e-14
+    /// of ‖q‖), a branch jump by a fraction of the step.
+    /// `f64::INFINITY` turns the check off, and its step back with it:
+    /// half the cost, and a biased chain wherever a solve can jump.
+    pub reverse_tolerance: f64,
+    /// The seed of every chain's generator (default 0).
+    pub seed: u64,
+}
+
+impl Default for SamplerOptions {
+    fn default() -> Self {
+        SamplerOptions {
+            chains: 4,
+            draws: 1000,
+            warmup: 1000,
+            steps: 10,
+            step_size: 0.1,
+            step_size_jitter: 0.0,
+            target_acceptance: Some(0.8),
+            reverse_tolerance: 1e-8,
+            seed: 0,
+        }
+    }
+}
+
+impl SamplerOptions {
+    /// Refuses options outside their domain.
+    ///
+    /// ```
+    /// use geoshake_runtime::sampler::{SamplerError, SamplerOptions};
+    /// let bad = SamplerOptions { step_size: -0.1, ..SamplerOptions::default() };
+    /// assert!(matches!(bad.validate(), Err(SamplerError::InvalidOption { what: "step_size", .. })));
+    /// assert!(SamplerOptions::default().validate().is_ok());
+    /// ```
+    pub fn validate(&self) -> Result<(), SamplerError> {
+        let invalid = |what, value: f64, why| Err(SamplerError::InvalidOption { what, value, why });
+        if self.chains == 0 {
+            return invalid("chains", 0.0, "at least one chain");
+        }
+        if self.draws == 0 {
+            return invalid("draws", 0.0, "at least one draw per chain");
+        }
+        if self.steps == 0 {
+            return invalid("steps", 0.0, "at least one RATTLE step per transition");
+        }
+        if !(self.step_size > 0.0 && self.step_size <= MAX_STEP_SIZE) {
+            return invalid("step_size", self.step_size, "positive and at most 1e6");
+        }
+        if !(0.0..1.0).contains(&self.step_size_jitter) {
+            return invalid("step_size_jitter", self.step_size_jitter, "in [0, 1)");
+        }
+        if let Some(t) = self.target_acceptance
+            && !(t > 0.0 && t < 1.0)
+        {
+            return invalid("target_acceptance", t, "strictly between 0 and 1");
+        }
+        if !(self.reverse_tolerance > 0.0) {
+            return invalid(
+                "reverse_tolerance",
+                self.reverse_tolerance,
+                "positive (infinity turns the check off)",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Samples the density e^{−U} (with respect to the Hausdorff measure on M)
+/// of `system`, H = ½|p|² + U(q) with holonomic constraints g(q), by
+/// constrained HMC (see the [module](self) docs). `starts` holds one point
+/// of M for every chain, or one for all.
+///
+/// Errors, before any transition: options out of their domain, a start of
+/// the wrong length, off M, or where U is not finite, and a system of
+/// another form. Nothing after that is an error: failed proposals are
+/// counted rejections, and a chain that rejected everything says so in
+/// [`Samples::summary`].
+///
+/// ```
+/// use geoshake_runtime::examples::Pendulum;
+/// use geoshake_runtime::sampler::{sample, SamplerError, SamplerOptions};
+/// let circle = Pendulum { gravity: 0.0, length: 1.0 };
+/// let opts = SamplerOptions::default();
+/// // (1, 0.1) is not on the unit circle.
+/// let err = sample(&circle, &[[1.0, 0.1]], &opts).unwrap_err();
+/// assert!(matches!(err, SamplerError::StartOffManifold { chain: 0, .. }));
+/// ```
+pub fn sample<S, Q>(
+    system: &S,
+    starts: &[Q],
+    options: &SamplerOptions,
+) -> Result<Samples, SamplerError>
+where
+    S: ConstrainedSystem + Clone + Send + Sync,
+    Q: AsRef<[f64]> + Sync,
+{
+    options.validate()?;
+    let d = system.dof();
+    if starts.len() != 1 && starts.len() != options.chains {
+        return Err(SamplerError::StartCount {
+            given: starts.len(),
+            chains: options.chains,
+        });
+    }
+    let start = |c: usize| starts[if starts.len() == 1 { 0 } else { c }].as_ref();
+    for c in 0..starts.len() {
+        if start(c).len() != d {
+            return Err(SamplerError::StartDimension {
+                chain: c,
+                given: start(c).len(),
+                dof: d,
+            });
+        }
+    }
+    check_structure(system)?;
+    let mut probe = Integrator::new(system.clone(), StormerVerlet, options.step_size);
+    for c in 0..starts.len() {
+        check_start(&mut probe, start(c), c)?;
+    }
+    check_identity_mass(system, start(0))?;
+
+    let outputs: Vec<chain::ChainOutput> = (0..options.chains)
+        .into_par_iter()
+        .map(|c| Chain::new(system, start(c), options.seed, c, options).run(options))
+        .collect();
+
+    let (chains, draws) = (options.chains, options.draws);
+    let mut samples = Samples {
+        chains,
+        draws,
+        dim: d,
+        positions: Vec::with_capacity(chains * draws * d),
+        accepted: Vec::with_capacity(chains * draws),
+        acceptance_probability: Vec::with_capacity(chains * draws),
+        energy: Vec::with_capacity(chains * draws),
+        steps: Vec::with_capacity(chains * draws),
+        rejection: Vec::with_capacity(chains * draws),
+        step_size: Vec::with_capacity(chains),
+    };
+    for out in outputs {
+        samples.positions.extend_from_slice(&out.positions);
+        for t in &out.transitions {
+            samples.accepted.push(t.accepted);
+            samples.acceptance_probability.push(t.alpha);
+            samples.energy.push(t.energy);
+            samples.steps.push(t.steps);
+            samples.rejection.push(t.rejection);
+        }
+        samples.step_size.push(out.step_size);
+    }
+    Ok(samples)
+}
+
+/// A start must be on M (the engine's test, with its tolerance) and have
+/// a finite potential.
+fn check_start<S: ConstrainedSystem>(
+    probe: &mut Integrator<S, StormerVerlet>,
+    q: &[f64],
+    chain: usize,
+) -> Result<(), SamplerError> {
+    let z = State::from_slices(q, &vec![0.0; q.len()]);
+    if probe.system().constraint_count() > 0 {
+        probe
+            .project(&z)
+            .map_err(|source| SamplerError::StartOffManifold { chain, source })?;
+    }
+    let potential = probe.system().hamiltonian(q, z.p.as_slice());
+    if !potential.is_finite() {
+        return Err(SamplerError::StartDensity { chain, potential });
+    }
+    Ok(())
+}
+
+/// The form the sampler needs, as the system declares it: holonomic g and
+/// a separable H.
+fn check_structure<S: ConstrainedSystem>(system: &S) -> Result<(), SamplerError> {
+    if !system.kind().is_holonomic() {
+        return Err(SamplerError::UnsupportedSystem {
+            why: "a constraint depends on the momenta",
+        });
+    }
+    if !system.separable() {
+        return Err(SamplerError::UnsupportedSystem {
+            why: "H is not separable, H ≠ T(p) + U(q)",
+        });
+    }
+    Ok(())
+}
+
+/// ∂H/∂p = p and H(q, p) − H(q, 0) = |p|²/2, checked at a start (where U
+/// is finite) on two momenta of distinct entries (so that no permutation
+/// or scaling of p passes), to round-off.
+fn check_identity_mass<S: ConstrainedSystem>(system: &S, q: &[f64]) -> Result<(), SamplerError> {
+    let d = q.len();
+    let mut grad = vec![0.0; d];
+    for shift in [0.5, 0.25] {
+        // Entries 1 + (k·φ mod 1) + shift: distinct, of order one.
+        let p: Vec<f64> = (0..d)
+            .map(|k| 1.0 + (k as f64 * 0.618_033_988_749_895).fract() + shift)
+            .collect();
+        system.grad_p(q, &p, &mut grad);
+        let potential = system.hamiltonian(q, &vec![0.0; d]);
+        let kinetic = system.hamiltonian(q, &p) - potential;
+        let half_norm = 0.5 * p.iter().map(|x| x * x).sum::<f64>();
+        let off = grad
+            .iter()
+            .zip(&p)
+            .any(|(g, x)| !((g - x).abs() <= 1e-12 * x.abs()));
+        // (H(q, p) − U(q) loses the digits of U: round-off relative to both.)
+        let scale = half_norm.max(potential.abs()).max(1.0);
+        if off || !((kinetic - half_norm).abs() <= 1e-10 * scale) {
+            return Err(SamplerError::UnsupportedSystem {
+                why: "the kinetic energy is not |p|²/2 (the sampler draws p from N(0, I))",
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
