@@ -271,10 +271,10 @@ fn main() {
     // `--case water:10000` runs one case (for profiling).
     let only: Option<String> = std::env::args().skip_while(|a| a != "--case").nth(1);
     for c in &cases {
-        if let Some(o) = &only {
-            if *o != format!("{}:{}", c.system, c.n) {
-                continue;
-            }
+        if let Some(o) = &only
+            && *o != format!("{}:{}", c.system, c.n)
+        {
+            continue;
         }
         run(c, tol);
     }

@@ -139,17 +139,17 @@ fn check_base<S: ConstrainedSystem + Clone, B: BaseMap>(
             prop_assert!(gh <= 1e-11 * scale, "|{{g,H}}| = {:e}", gh);
         }
     }
-    if s.rattle && B::SYMMETRIC {
-        if let Ok(z1) = integ.step(&z0) {
-            if let Ok(back) = integ.with_step_size(-s.h).step(&z1) {
-                let scale = 1.0 + z0.q.amax().max(z0.p.amax());
-                prop_assert!(
-                    back.distance(&z0) <= 1e-11 * scale,
-                    "R₋ₕ∘Rₕ: {:e}",
-                    back.distance(&z0)
-                );
-            }
-        }
+    if s.rattle
+        && B::SYMMETRIC
+        && let Ok(z1) = integ.step(&z0)
+        && let Ok(back) = integ.with_step_size(-s.h).step(&z1)
+    {
+        let scale = 1.0 + z0.q.amax().max(z0.p.amax());
+        prop_assert!(
+            back.distance(&z0) <= 1e-11 * scale,
+            "R₋ₕ∘Rₕ: {:e}",
+            back.distance(&z0)
+        );
     }
     Ok(())
 }
