@@ -18,70 +18,11 @@
 
 use std::time::Instant;
 
-use geoshake::constrained_system;
 use geoshake::sampler::{sample, Estimate, SamplerOptions, Samples};
 use geoshake::ConstrainedSystem;
 
-constrained_system! {
-    /// Uniform on the unit sphere S².
-    pub struct Sphere {
-        dof q[3], p[3];
-        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2) / 2;
-        constraints { sphere: q[0]^2 + q[1]^2 + q[2]^2 - 1 }
-    }
-}
-
-constrained_system! {
-    /// Von Mises–Fisher on S², π ∝ exp(κ z).
-    pub struct VonMisesFisher {
-        parameters { kappa }
-        dof q[3], p[3];
-        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2) / 2 - kappa * q[2];
-        constraints { sphere: q[0]^2 + q[1]^2 + q[2]^2 - 1 }
-    }
-}
-
-constrained_system! {
-    /// Coupled von Mises on the flat torus S¹ × S¹ ⊂ R⁴.
-    pub struct Torus {
-        parameters { k1, k2, nu }
-        dof q[4], p[4];
-        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2 + p[3]^2) / 2
-            - k1 * q[0] - k2 * q[2] - nu * (q[0] * q[2] + q[1] * q[3]);
-        constraints {
-            first: q[0]^2 + q[1]^2 - 1,
-            second: q[2]^2 + q[3]^2 - 1,
-        }
-    }
-}
-
-constrained_system! {
-    /// Matrix Fisher exp(κ tr R) on SO(3) ⊂ R⁹.
-    pub struct Rotation {
-        parameters { kappa }
-        dof q[9], p[9];
-        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2 + p[3]^2 + p[4]^2 + p[5]^2
-            + p[6]^2 + p[7]^2 + p[8]^2) / 2 - kappa * (q[0] + q[4] + q[8]);
-        constraints {
-            c00: q[0]^2 + q[3]^2 + q[6]^2 - 1,
-            c11: q[1]^2 + q[4]^2 + q[7]^2 - 1,
-            c22: q[2]^2 + q[5]^2 + q[8]^2 - 1,
-            c01: q[0] * q[1] + q[3] * q[4] + q[6] * q[7],
-            c02: q[0] * q[2] + q[3] * q[5] + q[6] * q[8],
-            c12: q[1] * q[2] + q[4] * q[5] + q[7] * q[8],
-        }
-    }
-}
-
-constrained_system! {
-    /// e^{−x²/2} along the curve y = a sin(ωx), with respect to arc length.
-    pub struct Wavy {
-        parameters { a, w }
-        dof q[2], p[2];
-        hamiltonian = (p[0]^2 + p[1]^2) / 2 + q[0]^2 / 2;
-        constraints { graph: q[1] - a * sin(w * q[0]) }
-    }
-}
+mod targets;
+use targets::{Rotation, Sphere, Torus, VonMisesFisher, Wavy};
 
 /// An expectation: its name, f, and the exact value.
 type Expectation = (&'static str, fn(&[f64]) -> f64, f64);
