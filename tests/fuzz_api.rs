@@ -407,6 +407,10 @@ enum Verdict {
 fn kind(e: &StepError) -> &'static str {
     match e {
         StepError::InvalidInput { .. } => "InvalidInput",
+        StepError::Shape { .. } => "Shape",
+        StepError::Topology(_) => "Topology",
+        StepError::Solver { .. } => "Solver",
+        StepError::AtMember { .. } => "AtMember",
         StepError::Storage { .. } => "Storage",
         StepError::NonFinite { .. } => "NonFinite",
         StepError::NewtonNotConverged { .. } => "NewtonNotConverged",

@@ -382,11 +382,13 @@ fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
     let nan = f64::NAN;
     let (err, time, residual) = match e {
         // (Too many states for memory: the steps and stride asked for.)
-        StepError::InvalidInput { .. } | StepError::Storage { .. } => {
-            (InvalidInputError::new_err(msg), nan, nan)
-        }
+        StepError::InvalidInput { .. }
+        | StepError::Shape { .. }
+        | StepError::Topology(_)
+        | StepError::Solver { .. }
+        | StepError::Storage { .. } => (InvalidInputError::new_err(msg), nan, nan),
         StepError::NonFinite { t, .. } => (NonFiniteError::new_err(msg), *t, nan),
-        StepError::NewtonNotConverged { t, source, .. } => {
+        StepError::NewtonNotConverged { t, source, .. } | StepError::AtMember { t, source, .. } => {
             let r = match source {
                 geoshake::SolveError::NotConverged { residual, .. } => *residual,
                 _ => nan,

@@ -4,6 +4,8 @@
 
 use std::fmt;
 
+use crate::particles::TopologyError;
+
 /// Which implicit equation of a step failed.
 ///
 /// ```
@@ -181,6 +183,35 @@ pub enum StepError {
         /// d (each state holds 2d numbers).
         dof: usize,
     },
+    /// An input has the wrong number of entries: a state, or q or p of a
+    /// particle state, whose length is not the system's. Found before any
+    /// step: it has no step or time.
+    #[error("invalid input: {what} has {got} entries, the system has {expected}")]
+    Shape {
+        /// Which input.
+        what: &'static str,
+        /// Its length.
+        got: usize,
+        /// The system's.
+        expected: usize,
+    },
+    /// A particle system's constraint graph cannot be run: a cluster with
+    /// more constraints than coordinates (N = G M⁻¹ Gᵀ singular whatever
+    /// the positions). Found by [`particles::Rattle::new`](crate::particles::Rattle::new),
+    /// before any step; the other [`TopologyError`]s are refused where the
+    /// system is built.
+    #[error(transparent)]
+    Topology(#[from] TopologyError),
+    /// The solver the options force on a particle system cannot take its
+    /// constraint graph (clusters too large, a band too wide). Found
+    /// before any step.
+    #[error("the {solver} solver cannot take this constraint graph: {why}")]
+    Solver {
+        /// The solver asked for.
+        solver: &'static str,
+        /// Why not.
+        why: String,
+    },
     /// A state (the input or one computed) has a NaN or infinite entry.
     #[error("non-finite value in the {what} at step {step}, t = {}: entry {entry} of z = (q, p)", human(*.t))]
     NonFinite {
@@ -204,6 +235,29 @@ pub enum StepError {
         /// Time.
         t: f64,
         /// Iterations and residual.
+        #[source]
+        source: SolveError,
+    },
+    /// An equation of a particle system's step failed at one member of a
+    /// constraint family (the particle path solves each cluster, or the
+    /// whole graph, on its own, and names the member whose residual is
+    /// worst or whose pivot vanished). `source` says why: the budget ran
+    /// out (with the relative residual |g_k| / (|∇g_k| · extent) of that
+    /// member), or the Newton matrix G(q1) M⁻¹ G(q0)ᵀ (stage SHAKE) or N =
+    /// G M⁻¹ Gᵀ (stage RATTLE, or the projection onto M) is singular there.
+    #[error("{stage} failed at member {member} of `{family}` at step {step}, t = {}: {source}", human(*.t))]
+    AtMember {
+        /// Which equation.
+        stage: Stage,
+        /// Step index.
+        step: u64,
+        /// Time.
+        t: f64,
+        /// The constraint family's declared name.
+        family: String,
+        /// The member (row of the family's table).
+        member: usize,
+        /// Why.
         #[source]
         source: SolveError,
     },
@@ -338,10 +392,14 @@ impl StepError {
     /// ```
     pub fn step(&self) -> u64 {
         match *self {
-            StepError::InvalidInput { .. } => 0,
+            StepError::InvalidInput { .. }
+            | StepError::Shape { .. }
+            | StepError::Topology(_)
+            | StepError::Solver { .. } => 0,
             StepError::Storage { step, .. }
             | StepError::NonFinite { step, .. }
             | StepError::NewtonNotConverged { step, .. }
+            | StepError::AtMember { step, .. }
             | StepError::SingularShakeJacobian { step, .. }
             | StepError::SingularNondegeneracyMatrix { step, .. }
             | StepError::NondegeneracyLost { step, .. }
@@ -362,9 +420,14 @@ impl StepError {
     /// ```
     pub fn time(&self) -> Option<f64> {
         match *self {
-            StepError::InvalidInput { .. } | StepError::Storage { .. } => None,
+            StepError::InvalidInput { .. }
+            | StepError::Shape { .. }
+            | StepError::Topology(_)
+            | StepError::Solver { .. }
+            | StepError::Storage { .. } => None,
             StepError::NonFinite { t, .. }
             | StepError::NewtonNotConverged { t, .. }
+            | StepError::AtMember { t, .. }
             | StepError::SingularShakeJacobian { t, .. }
             | StepError::SingularNondegeneracyMatrix { t, .. }
             | StepError::NondegeneracyLost { t, .. }
@@ -390,9 +453,14 @@ impl StepError {
     /// are, and every caller of them passes the step's own k and t0 + k·h.
     pub(crate) fn at(mut self, step_index: u64, time: f64) -> Self {
         match &mut self {
-            StepError::InvalidInput { .. } | StepError::Storage { .. } => {}
+            StepError::InvalidInput { .. }
+            | StepError::Shape { .. }
+            | StepError::Topology(_)
+            | StepError::Solver { .. }
+            | StepError::Storage { .. } => {}
             StepError::NonFinite { step, t, .. }
             | StepError::NewtonNotConverged { step, t, .. }
+            | StepError::AtMember { step, t, .. }
             | StepError::SingularShakeJacobian { step, t, .. }
             | StepError::SingularNondegeneracyMatrix { step, t, .. }
             | StepError::NondegeneracyLost { step, t, .. }

@@ -3,9 +3,10 @@
 //! at step k returns the states up to k − 1.
 
 use geoshake::runtime::particles::{
-    generate, stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle,
-    Stencil, Table, TopologyError,
+    generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, Stencil, Table,
+    TopologyError,
 };
+use geoshake::runtime::{SolveError, Stage, StepError};
 
 fn bonds(rows: &[(usize, usize, f64)]) -> Table {
     let mut t = Table::new(2, 1);
@@ -84,7 +85,7 @@ fn more_constraints_than_coordinates_in_a_cluster() {
     let e = Rattle::new(system, 0.1, Options::default()).err().unwrap();
     assert_eq!(
         e,
-        ParticleError::Topology(TopologyError::TooManyConstraints {
+        StepError::Topology(TopologyError::TooManyConstraints {
             family: "rod".into(),
             member: 1,
             constraints: 3,
@@ -98,7 +99,10 @@ fn step_size_must_be_finite_and_positive() {
     for h in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         let (system, _) = generate::chain(3, 1).unwrap();
         let e = Rattle::new(system, h, Options::default()).err().unwrap();
-        assert!(matches!(e, ParticleError::StepSize { .. }), "{h}: {e}");
+        assert!(
+            matches!(e, StepError::InvalidInput { what, .. } if what.contains("step size")),
+            "{h}: {e}"
+        );
     }
 }
 
@@ -110,11 +114,12 @@ fn nan_in_the_state_is_reported_where_it_is() {
     let e = r.step(&mut state).unwrap_err();
     assert_eq!(
         e,
-        ParticleError::NotFinite {
+        // p[7] is entry d + 7 of z = (q, p), d = 12.
+        StepError::NonFinite {
+            what: "initial state",
             step: 1,
-            time: 2.0,
-            what: "p",
-            index: 7
+            t: 2.0,
+            entry: 19
         }
     );
     assert_eq!(state.step(), 0);
@@ -127,7 +132,7 @@ fn wrong_state_shape_is_refused() {
     let mut s = ParticleState::new(vec![0.0; 5], vec![0.0; 12]);
     assert!(matches!(
         r.step(&mut s),
-        Err(ParticleError::Shape {
+        Err(StepError::Shape {
             what: "q",
             got: 5,
             expected: 12
@@ -154,18 +159,24 @@ fn huge_step_fails_at_the_first_step() {
         let out = r.run(&mut state, 5, 1);
         let (traj, e) = out.into_result().unwrap_err();
         match e {
-            ParticleError::NotConverged {
+            StepError::AtMember {
+                stage: Stage::Shake,
                 step,
-                time,
-                iterations,
+                t,
                 ref family,
+                source: SolveError::NotConverged { iterations, .. },
                 ..
             } => {
-                assert_eq!((step, time, family.as_str()), (1, 10.0 + 2.0e4, "bond"));
+                assert_eq!((step, t, family.as_str()), (1, 10.0 + 2.0e4, "bond"));
                 assert!(iterations > 0);
             }
-            ParticleError::Singular { step, time, .. } => {
-                assert_eq!((step, time), (1, 10.0 + 2.0e4))
+            StepError::AtMember {
+                step,
+                t,
+                source: SolveError::Singular { .. },
+                ..
+            } => {
+                assert_eq!((step, t), (1, 10.0 + 2.0e4))
             }
             other => panic!("{solver}: {other}"),
         }
@@ -216,10 +227,10 @@ fn newton_failure_at_step_k_returns_states_up_to_k_minus_1() {
     let out = r.run(&mut state, 10_000, 1);
     let (traj, e) = out.into_result().unwrap_err();
     let k = match e {
-        ParticleError::NotConverged {
+        StepError::AtMember {
             step,
-            time,
-            residual,
+            t: time,
+            source: SolveError::NotConverged { residual, .. },
             ref family,
             member,
             ..
@@ -229,7 +240,12 @@ fn newton_failure_at_step_k_returns_states_up_to_k_minus_1() {
             assert_eq!((family.as_str(), member), ("bond", 0));
             step
         }
-        ParticleError::Singular { step, time, .. } => {
+        StepError::AtMember {
+            step,
+            t: time,
+            source: SolveError::Singular { .. },
+            ..
+        } => {
             assert_eq!(time, t0 + step as f64 * h);
             step
         }

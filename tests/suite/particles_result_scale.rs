@@ -6,9 +6,9 @@
 //! at the result instead of at the input, without squares.
 
 use geoshake::runtime::particles::{
-    stencils::Distance, Options, ParticleError, ParticleState, ParticleSystem, Rattle,
-    SolverChoice, Table,
+    stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, SolverChoice, Table,
 };
+use geoshake::runtime::{SolveError, StepError};
 
 const TOL: f64 = 1e-10;
 /// The hidden residual a projection may leave (`tolerance::HIDDEN_LIMIT`):
@@ -98,7 +98,10 @@ fn a_projection_from_far_off_m_ends_on_m_or_fails() {
                 Err(e) => assert!(
                     matches!(
                         e,
-                        ParticleError::NotConverged { .. } | ParticleError::Singular { .. }
+                        StepError::AtMember {
+                            source: SolveError::NotConverged { .. } | SolveError::Singular { .. },
+                            ..
+                        }
                     ),
                     "{solver:?} from {far:e}: {e}"
                 ),

@@ -1,6 +1,7 @@
 use super::*;
 use crate::error::{SolveError, Stage, StepError};
 use crate::examples::Pendulum;
+use crate::particles::TopologyError;
 use crate::{Stop, StormerVerlet};
 
 fn bits(k: usize, out: &RunOutcome) -> Vec<u64> {
@@ -147,7 +148,72 @@ fn every_error_round_trips() {
                 predicted: 1e-2,
             })),
         },
+        StepError::Shape {
+            what: "q",
+            got: 7,
+            expected: 9,
+        },
+        StepError::AtMember {
+            stage: Stage::Shake,
+            step: 3,
+            t: 6.0,
+            family: "bond".to_string(),
+            member: 123_456,
+            source: SolveError::NotConverged {
+                iterations: 50,
+                residual: 3e-4,
+            },
+        },
+        StepError::Solver {
+            solver: "band",
+            why: "N's half-bandwidth is 80 (at most 64)".to_string(),
+        },
     ];
+    let topology = [
+        TopologyError::RowShape {
+            family: "angle".to_string(),
+            member: 2,
+            what: "particles",
+            got: 2,
+            expected: 3,
+        },
+        TopologyError::RepeatedParticle {
+            family: "bond".to_string(),
+            member: 4,
+            particle: 1,
+        },
+        TopologyError::DanglingParticle {
+            family: "bond".to_string(),
+            member: 5,
+            particle: 10,
+            particles: 9,
+        },
+        TopologyError::DuplicateMember {
+            family: "bond".to_string(),
+            first: 0,
+            second: 3,
+        },
+        TopologyError::BadValue {
+            family: "bond".to_string(),
+            member: 1,
+            value: -1.0,
+            why: "a length must be positive",
+        },
+        TopologyError::TooManyConstraints {
+            family: "ring".to_string(),
+            member: 0,
+            constraints: 7,
+            coordinates: 6,
+        },
+        TopologyError::Dimension {
+            family: "planar".to_string(),
+            stencil: 2,
+            system: 3,
+        },
+    ];
+    let errors = errors
+        .into_iter()
+        .chain(topology.into_iter().map(StepError::Topology));
     // A branch jump whose cause is a branch jump never comes out of a run;
     // read from a corrupt record it is an error, not a deep recursion.
     out.error = Some(StepError::BranchJump {

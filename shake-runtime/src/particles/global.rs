@@ -5,7 +5,8 @@
 
 use super::graph::{self, Numbering};
 use super::plan::ClusterArgs;
-use super::{ParticleError, ParticleSystem};
+use super::ParticleSystem;
+use crate::error::{SolveError, Stage, StepError};
 use crate::report::StepReport;
 use crate::solver::SpdSolver;
 
@@ -158,21 +159,22 @@ impl Global {
         system: &ParticleSystem,
         num: &Numbering,
         pivot: usize,
+        stage: Stage,
         iterations: usize,
         k: u64,
         time: f64,
-    ) -> ParticleError {
+    ) -> StepError {
         // The sparse solver's pivot is in its own order; name a member of
         // the system anyway (the pivot's constraint in natural order).
-        let (f, member) = num.locate(pivot.min(system.constraints().saturating_sub(1)));
-        ParticleError::Singular {
-            step: k,
+        let c = pivot.min(system.constraints().saturating_sub(1));
+        num.error_at(
+            system,
+            c,
+            stage,
+            k,
             time,
-            matrix: "N = G M⁻¹ Gᵀ",
-            iterations,
-            family: system.constraint_families()[f].name().to_string(),
-            member,
-        }
+            SolveError::Singular { iterations },
+        )
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -187,7 +189,14 @@ impl Global {
         k: u64,
         time: f64,
         report: &mut StepReport,
-    ) -> Result<(), ParticleError> {
+    ) -> Result<(), StepError> {
+        // Newton along the fibre from a step, or the projection of initial
+        // data onto M (no 1/h: no momenta to update).
+        let stage = if args.inv_h != 0.0 {
+            Stage::Shake
+        } else {
+            Stage::ProjectionOntoM
+        };
         let d = system.dim();
         let inv_m = system.inverse_masses();
         if !reuse {
@@ -200,7 +209,7 @@ impl Global {
                 &mut self.scale0,
             );
             self.assemble_factor(d, inv_m, 0)
-                .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
+                .map_err(|p| Self::singular(system, num, p, stage, 0, k, time))?;
         }
         if reuse && args.inv_h != 0.0 {
             // Warm start along a trajectory: the previous step's ν.
@@ -227,12 +236,8 @@ impl Global {
                 }
             }
             if !worst.is_finite() {
-                return Err(ParticleError::NotFinite {
-                    step: k,
-                    time,
-                    what: "constraint",
-                    index: worst_c,
-                });
+                let source = SolveError::NonFinite { iterations: it };
+                return Err(num.error_at(system, worst_c, stage, k, time, source));
             }
             if worst <= args.tol {
                 report.max_rel_g = worst;
@@ -246,15 +251,11 @@ impl Global {
             // A simplified Newton that has grown the residual a millionfold
             // is diverging: stop before the budget.
             if it >= args.max_iter || worst > 1e6 * first {
-                let (f, member) = num.locate(worst_c);
-                return Err(ParticleError::NotConverged {
-                    step: k,
-                    time,
-                    residual: worst,
+                let source = SolveError::NotConverged {
                     iterations: it,
-                    family: system.constraint_families()[f].name().to_string(),
-                    member,
-                });
+                    residual: worst,
+                };
+                return Err(num.error_at(system, worst_c, stage, k, time, source));
             }
             // g is re-evaluated next iteration: solve in its buffer.
             std::mem::swap(&mut self.delta, &mut self.g);
@@ -287,7 +288,7 @@ impl Global {
         k: u64,
         time: f64,
         report: &mut StepReport,
-    ) -> Result<(), ParticleError> {
+    ) -> Result<(), StepError> {
         let d = system.dim();
         let inv_m = system.inverse_masses();
         Self::gradients(
@@ -299,7 +300,7 @@ impl Global {
             &mut self.scale1,
         );
         self.assemble_factor(d, inv_m, 1)
-            .map_err(|p| Self::singular(system, num, p, 0, k, time))?;
+            .map_err(|p| Self::singular(system, num, p, Stage::Rattle, 0, k, time))?;
         self.hidden(system, num, pn, false);
         self.solver.solve(&mut self.delta);
         Self::scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
@@ -316,22 +317,18 @@ impl Global {
             }
         }
         if !(worst_g <= tol) {
-            let (f, member) = num.locate(worst_c);
-            return Err(ParticleError::NotConverged {
-                step: k,
-                time,
-                residual: worst_g,
+            let source = SolveError::NotConverged {
                 iterations: report.newton_iterations,
-                family: system.constraint_families()[f].name().to_string(),
-                member,
-            });
+                residual: worst_g,
+            };
+            return Err(num.error_at(system, worst_c, Stage::Shake, k, time, source));
         }
         // The hidden residual after projection, relative per member: above
         // round-off after an exact solve (or NaN), N is singular to
         // working precision.
         let worst = self.hidden(system, num, pn, true);
         if !(worst <= crate::tolerance::HIDDEN_LIMIT) {
-            return Err(Self::singular(system, num, 0, 0, k, time));
+            return Err(Self::singular(system, num, 0, Stage::Rattle, 0, k, time));
         }
         report.max_hidden = worst;
         // grad1/scale1 (at q1) become the next step's grad0/scale0.

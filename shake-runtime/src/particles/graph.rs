@@ -4,6 +4,7 @@
 
 use super::plan::{FamilyClusters, MAX_CLUSTER, MAX_CLUSTER_COORDS};
 use super::{ParticleSystem, TopologyError};
+use crate::error::{SolveError, Stage, StepError};
 
 /// Constraint c of the system as (family, member).
 #[derive(Clone, Debug)]
@@ -32,6 +33,42 @@ impl Numbering {
     pub(crate) fn locate(&self, c: usize) -> (usize, usize) {
         let f = self.offsets.partition_point(|&o| o <= c) - 1;
         (f, c - self.offsets[f])
+    }
+
+    /// The error of `stage` at member `member` of family `f`, step k at
+    /// `time`: the member named by its family's declared name.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn member_error(
+        system: &ParticleSystem,
+        f: usize,
+        member: usize,
+        stage: Stage,
+        k: u64,
+        time: f64,
+        source: SolveError,
+    ) -> StepError {
+        StepError::AtMember {
+            stage,
+            step: k,
+            t: time,
+            family: system.constraint_families()[f].name().to_string(),
+            member,
+            source,
+        }
+    }
+
+    /// [`member_error`](Self::member_error) at constraint c (global number).
+    pub(crate) fn error_at(
+        &self,
+        system: &ParticleSystem,
+        c: usize,
+        stage: Stage,
+        k: u64,
+        time: f64,
+        source: SolveError,
+    ) -> StepError {
+        let (f, member) = self.locate(c);
+        Self::member_error(system, f, member, stage, k, time, source)
     }
 }
 

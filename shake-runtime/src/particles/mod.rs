@@ -70,7 +70,7 @@ mod system;
 mod table;
 
 pub use crate::report::StepReport;
-pub use error::{ParticleError, TopologyError};
+pub use error::TopologyError;
 pub use options::{Method, Options, SolverChoice};
 #[doc(hidden)]
 pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};

@@ -2,7 +2,7 @@
 //! method, the solver for the multipliers' linear systems, the tolerances
 //! ([`Options`]) and the per-step [`StepReport`].
 
-use super::ParticleError;
+use crate::error::StepError;
 use crate::tolerance::{MAX_ITERATIONS, MIN_RELATIVE_TOLERANCE};
 
 /// SHAKE (positions constrained, momenta as Störmer–Verlet leaves them) or
@@ -63,31 +63,29 @@ pub struct Options {
 
 impl Options {
     /// `Ok` when every option is in its documented range, else
-    /// [`ParticleError::InvalidOption`] naming it and its value.
+    /// [`StepError::InvalidInput`] naming it, its range and its value.
     /// [`Rattle::new`](super::Rattle::new) calls it.
     ///
     /// ```
-    /// use geoshake_runtime::particles::{Options, ParticleError};
+    /// use geoshake_runtime::{particles::Options, StepError};
     /// assert!(Options::default().validate().is_ok());
     /// let tiny = Options { tol: 1e-20, ..Options::default() };
     /// assert!(matches!(
     ///     tiny.validate(),
-    ///     Err(ParticleError::InvalidOption { what: "tol", value, .. }) if value == 1e-20
+    ///     Err(StepError::InvalidInput { what, value }) if what.starts_with("tol") && value == 1e-20
     /// ));
     /// ```
-    pub fn validate(&self) -> Result<(), ParticleError> {
+    pub fn validate(&self) -> Result<(), StepError> {
         if !(self.tol >= MIN_RELATIVE_TOLERANCE && self.tol < 1.0) {
-            return Err(ParticleError::InvalidOption {
-                what: "tol",
+            return Err(StepError::InvalidInput {
+                what: "tol, the relative residual tolerance, must lie in [4ε, 1) (4ε ≈ 8.9e-16: below it f64 rounding alone can keep the residual above the tolerance)",
                 value: self.tol,
-                why: "the relative residual tolerance must lie in [4ε, 1) (4ε ≈ 8.9e-16: below it f64 rounding alone can keep the residual above the tolerance)",
             });
         }
         if self.max_iter == 0 || self.max_iter > MAX_ITERATIONS {
-            return Err(ParticleError::InvalidOption {
-                what: "max_iter",
+            return Err(StepError::InvalidInput {
+                what: "max_iter, the Newton iteration budget, must lie in 1 ..= 10000",
                 value: self.max_iter as f64,
-                why: "the Newton iteration budget must lie in 1 ..= 10000",
             });
         }
         Ok(())

@@ -7,7 +7,8 @@ use super::global::Global;
 use super::graph::{self, Numbering};
 use super::options::{Method, Options, SolverChoice};
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
-use super::{ParticleError, ParticleState, ParticleSystem};
+use super::{ParticleState, ParticleSystem};
+use crate::error::{SolveError, Stage, StepError};
 use crate::report::StepReport;
 use crate::solver::SpdSolver;
 
@@ -71,9 +72,12 @@ impl Rattle {
     /// their range ([`Options::validate`]), a cluster with more
     /// constraints than coordinates, and a forced solver that cannot take
     /// the graph.
-    pub fn new(system: ParticleSystem, h: f64, options: Options) -> Result<Self, ParticleError> {
+    pub fn new(system: ParticleSystem, h: f64, options: Options) -> Result<Self, StepError> {
         if !(h.is_finite() && h > 0.0 && (1.0 / h).is_finite()) {
-            return Err(ParticleError::StepSize { h });
+            return Err(StepError::InvalidInput {
+                what: "the step size h must be finite and positive (and 1/h finite)",
+                value: h,
+            });
         }
         options.validate()?;
         let num = Numbering::new(&system);
@@ -83,7 +87,7 @@ impl Rattle {
         let choice = match options.solver {
             SolverChoice::Auto if small => SolverChoice::Clusters,
             SolverChoice::Clusters if !small => {
-                return Err(ParticleError::Solver {
+                return Err(StepError::Solver {
                     solver: "clusters",
                     why: format!(
                         "a cluster has more than {} constraints or spans families",
@@ -105,14 +109,14 @@ impl Rattle {
             let (pattern, b) = comps.pattern(m);
             let solver = match choice {
                 SolverChoice::Band if b > 64 => {
-                    return Err(ParticleError::Solver {
+                    return Err(StepError::Solver {
                         solver: "band",
                         why: format!("N's half-bandwidth is {b} (at most 64)"),
                     })
                 }
                 SolverChoice::Band => SpdSolver::band(m, &pattern),
                 SolverChoice::Auto if b <= 16 => SpdSolver::band(m, &pattern),
-                _ => SpdSolver::sparse(m, &pattern).map_err(|why| ParticleError::Solver {
+                _ => SpdSolver::sparse(m, &pattern).map_err(|why| StepError::Solver {
                     solver: "sparse",
                     why,
                 })?,
@@ -217,98 +221,89 @@ impl Rattle {
         self.stamp
     }
 
-    fn check_shape(&self, state: &ParticleState) -> Result<(), ParticleError> {
+    fn check_shape(&self, q: &[f64], p: &[f64]) -> Result<(), StepError> {
         let d = self.qn.len();
-        if state.q.len() != d {
-            return Err(ParticleError::Shape {
-                what: "q",
-                got: state.q.len(),
-                expected: d,
-            });
-        }
-        if state.p.len() != d {
-            return Err(ParticleError::Shape {
-                what: "p",
-                got: state.p.len(),
-                expected: d,
-            });
+        for (what, got) in [("q", q.len()), ("p", p.len())] {
+            if got != d {
+                return Err(StepError::Shape {
+                    what,
+                    got,
+                    expected: d,
+                });
+            }
         }
         Ok(())
     }
 
+    /// `Ok` when every entry of `v` is finite, else [`StepError::NonFinite`]
+    /// at step k naming `what` and the entry of z = (q, p) it is (`v` holds
+    /// q, or p or a force on p when `offset` = d).
     fn not_finite(
         step: u64,
         time: f64,
         what: &'static str,
         v: &[f64],
-    ) -> Result<(), ParticleError> {
+        offset: usize,
+    ) -> Result<(), StepError> {
         match v.iter().position(|x| !x.is_finite()) {
-            Some(index) => Err(ParticleError::NotFinite {
-                step,
-                time,
+            Some(entry) => Err(StepError::NonFinite {
                 what,
-                index,
+                step,
+                t: time,
+                entry: offset + entry,
             }),
             None => Ok(()),
         }
     }
 
-    /// ∇V(q) into `self.force`.
-    fn forces(&mut self, q: &[f64], step: u64, time: f64) -> Result<(), ParticleError> {
+    /// ∇V(q) into `self.force`; a non-finite force is reported at the
+    /// entry of p it would change.
+    fn forces(&mut self, q: &[f64], step: u64, time: f64) -> Result<(), StepError> {
         self.force.fill(0.0);
         for f in self.system.potential_families() {
             f.energy_gradient(q, &mut self.force);
         }
-        Self::not_finite(step, time, "force", &self.force)
+        Self::not_finite(step, time, "forces ∇V(q)", &self.force, q.len())
     }
 
-    fn cluster_error(&self, f: usize, e: ClusterFailure, step: u64, time: f64) -> ParticleError {
-        let family = self.system.constraint_families()[f].name().to_string();
-        match e.kind {
-            FailureKind::NotConverged => ParticleError::NotConverged {
-                step,
-                time,
-                residual: e.residual,
-                iterations: e.iterations,
-                family,
-                member: e.member,
-            },
-            FailureKind::SingularNewton => ParticleError::Singular {
-                step,
-                time,
-                matrix: "Newton matrix G(q1) M⁻¹ G(q0)ᵀ",
-                iterations: e.iterations,
-                family,
-                member: e.member,
-            },
-            FailureKind::SingularN => ParticleError::Singular {
-                step,
-                time,
-                matrix: "N = G M⁻¹ Gᵀ",
-                iterations: e.iterations,
-                family,
-                member: e.member,
-            },
-            FailureKind::NotFinite => ParticleError::NotFinite {
-                step,
-                time,
-                what: "constraint",
-                index: self.num.offsets[f] + e.member,
-            },
-        }
+    /// A cluster kernel's failure in `stage`, at its family's member.
+    fn cluster_error(
+        &self,
+        f: usize,
+        e: ClusterFailure,
+        stage: Stage,
+        step: u64,
+        time: f64,
+    ) -> StepError {
+        let iterations = e.iterations;
+        let (stage, source) = match e.kind {
+            FailureKind::NotConverged => (
+                stage,
+                SolveError::NotConverged {
+                    iterations,
+                    residual: e.residual,
+                },
+            ),
+            // G(q1) M⁻¹ G(q0)ᵀ, the Newton matrix of the position stage.
+            FailureKind::SingularNewton => (stage, SolveError::Singular { iterations }),
+            // N = G M⁻¹ Gᵀ: the matrix of the projection onto M^H.
+            FailureKind::SingularN => (Stage::Rattle, SolveError::Singular { iterations }),
+            FailureKind::NotFinite => (stage, SolveError::NonFinite { iterations }),
+        };
+        Numbering::member_error(&self.system, f, e.member, stage, step, time, source)
     }
 
     /// One step of the method from `state` (step k − 1 at t0 + (k−1)h) to
     /// step k at t0 + k·h, in place. On failure the state is left as it was
     /// and the error names step k and time t0 + k·h.
-    pub fn step(&mut self, state: &mut ParticleState) -> Result<StepReport, ParticleError> {
-        self.check_shape(state)?;
+    pub fn step(&mut self, state: &mut ParticleState) -> Result<StepReport, StepError> {
+        self.check_shape(&state.q, &state.p)?;
         let k = state.step + 1;
         let time = state.t0 + k as f64 * self.h;
         // A NaN or infinite t0, or t0 + k·h past f64's range, would be
         // stamped on the state and on every error from here on.
         if !time.is_finite() {
-            return Err(ParticleError::InvalidInput {
+            return Err(StepError::InvalidInput {
                 what: "the step's time t0 + k·h must be finite",
                 value: time,
             });
@@ -320,8 +315,8 @@ impl Rattle {
         // step that fails half-way must not leave them claiming a state.
         self.stamp = 0;
         if !continued {
-            Self::not_finite(k, time, "q", &state.q)?;
-            Self::not_finite(k, time, "p", &state.p)?;
+            Self::not_finite(k, time, "initial state", &state.q, 0)?;
+            Self::not_finite(k, time, "initial state", &state.p, state.q.len())?;
         }
         // p̃ = p0 − (h/2) ∇V(q0), q̃ = q0 + h M⁻¹ p̃.
         if self.has_potential && !(continued && self.force_stamp == state.stamp) {
@@ -364,8 +359,8 @@ impl Rattle {
         if self.options.method == Method::Rattle && !self.fused() {
             self.velocity_stage(k, time, &mut report)?;
         }
-        Self::not_finite(k, time, "p", &self.pn)?;
-        Self::not_finite(k, time, "q", &self.qn)?;
+        Self::not_finite(k, time, "state", &self.qn, 0)?;
+        Self::not_finite(k, time, "state", &self.pn, self.qn.len())?;
         std::mem::swap(&mut state.q, &mut self.qn);
         std::mem::swap(&mut state.p, &mut self.pn);
         state.step = k;
@@ -391,15 +386,15 @@ impl Rattle {
     /// reached by Newton along M⁻¹ G(q)ᵀ (the fibre direction), then
     /// p ← p − G(q)ᵀ μ with G(q) M⁻¹ p = 0. p is projected even for SHAKE.
     /// Errors report step 0 and the state's time.
-    pub fn project(&mut self, state: &mut ParticleState) -> Result<StepReport, ParticleError> {
-        self.check_shape(state)?;
+    pub fn project(&mut self, state: &mut ParticleState) -> Result<StepReport, StepError> {
+        self.check_shape(&state.q, &state.p)?;
         // The projection overwrites N's factor, G and ν: no state may count
         // as "continued" afterwards (a step of another state would reuse
         // this one's factor: found by the hostile review).
         self.stamp = 0;
         let (k, time) = (state.step, state.time);
-        Self::not_finite(k, time, "q", &state.q)?;
-        Self::not_finite(k, time, "p", &state.p)?;
+        Self::not_finite(k, time, "initial state", &state.q, 0)?;
+        Self::not_finite(k, time, "initial state", &state.p, state.q.len())?;
         self.qn.copy_from_slice(&state.q);
         self.pn.copy_from_slice(&state.p);
         let mut report = StepReport::default();
@@ -422,7 +417,12 @@ impl Rattle {
         k: u64,
         time: f64,
         report: &mut StepReport,
-    ) -> Result<(), ParticleError> {
+    ) -> Result<(), StepError> {
+        let stage = if inv_h != 0.0 {
+            Stage::Shake
+        } else {
+            Stage::ProjectionOntoM
+        };
         let args = ClusterArgs {
             q0,
             inv_mass: self.system.inverse_masses(),
@@ -457,7 +457,7 @@ impl Rattle {
                         &mut self.pn,
                         &mut rep,
                     ) {
-                        return Err(self.cluster_error(f, e, k, time));
+                        return Err(self.cluster_error(f, e, stage, k, time));
                     }
                 }
                 report.max_rel_g = rep.max_rel;
@@ -489,7 +489,7 @@ impl Rattle {
         k: u64,
         time: f64,
         report: &mut StepReport,
-    ) -> Result<(), ParticleError> {
+    ) -> Result<(), StepError> {
         match &mut self.path {
             Path::Clusters { plans, .. } => {
                 let mut rep = ClusterReport::default();
@@ -501,7 +501,7 @@ impl Rattle {
                         &mut self.pn,
                         &mut rep,
                     ) {
-                        return Err(self.cluster_error(f, e, k, time));
+                        return Err(self.cluster_error(f, e, Stage::Rattle, k, time));
                     }
                 }
                 report.max_hidden = rep.max_hidden;

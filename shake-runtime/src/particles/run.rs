@@ -3,7 +3,8 @@
 
 use std::num::NonZeroU64;
 
-use super::{ParticleError, ParticleState, Rattle, Trajectory};
+use super::{ParticleState, Rattle, Trajectory};
+use crate::error::StepError;
 use crate::tolerance::{check_run, stored_states, MAX_STEPS};
 
 /// What a run measured over its steps.
@@ -32,13 +33,13 @@ pub struct RunOutcome {
     /// Measured over the successful steps.
     pub summary: RunSummary,
     /// The failure (step k, time t0 + k·h) that ended the run.
-    pub error: Option<ParticleError>,
+    pub error: Option<StepError>,
 }
 
 impl RunOutcome {
     /// The trajectory and summary, or the partial trajectory with the error.
     #[allow(clippy::result_large_err)]
-    pub fn into_result(self) -> Result<(Trajectory, RunSummary), (Trajectory, ParticleError)> {
+    pub fn into_result(self) -> Result<(Trajectory, RunSummary), (Trajectory, StepError)> {
         match self.error {
             None => Ok((self.trajectory, self.summary)),
             Some(e) => Err((self.trajectory, e)),
@@ -56,12 +57,12 @@ impl Rattle {
     /// Before any step the request is checked as a whole, as the dense
     /// driver checks its own: the start time finite, the last step index at
     /// most [`MAX_STEPS`](crate::validate::MAX_STEPS) and its time
-    /// t0 + k·h finite ([`ParticleError::InvalidInput`]), and the states to
+    /// t0 + k·h finite ([`StepError::InvalidInput`]), and the states to
     /// store counted without overflow and reserved
-    /// ([`ParticleError::Storage`] when they do not fit).
+    /// ([`StepError::Storage`] when they do not fit).
     ///
     /// ```
-    /// use geoshake_runtime::particles::{generate, Options, ParticleError, Rattle};
+    /// use geoshake_runtime::{particles::{generate, Options, Rattle}, StepError};
     /// let (system, mut state) = generate::chain(20, 7).unwrap();
     /// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();
@@ -72,7 +73,7 @@ impl Rattle {
     /// assert!(summary.max_rel_g <= 1e-10);
     /// // More steps than f64 can count exactly: refused before the first.
     /// let out = rattle.run(&mut state, u64::MAX, 1);
-    /// assert!(matches!(out.error, Some(ParticleError::InvalidInput { .. })));
+    /// assert!(matches!(out.error, Some(StepError::InvalidInput { .. })));
     /// assert_eq!(state.step(), 100);
     /// ```
     pub fn run(&mut self, state: &mut ParticleState, steps: u64, stride: u64) -> RunOutcome {
@@ -87,7 +88,7 @@ impl Rattle {
         let last = match check_run(state.t0, self.step_size(), first, steps) {
             Ok(last) => last,
             Err(l) => {
-                let e = ParticleError::InvalidInput {
+                let e = StepError::InvalidInput {
                     what: l.what(),
                     value: l.value(),
                 };
@@ -100,7 +101,7 @@ impl Rattle {
             // an abort of the process after hours.
             let stored = stored_states(first, last, s, false);
             if stored.is_none_or(|n| trajectory.try_reserve(n).is_err()) {
-                let e = ParticleError::Storage {
+                let e = StepError::Storage {
                     step: first,
                     states: stored.unwrap_or(u64::MAX),
                     dof: state.q.len(),
@@ -156,18 +157,18 @@ impl Rattle {
     /// Runs from `state` to time `t_end`: round((t_end − t)/h) steps, none
     /// when `t_end` is before `t`. A `t_end` that is NaN or infinite, or
     /// more than [`MAX_STEPS`](crate::validate::MAX_STEPS) steps away, is
-    /// refused with [`ParticleError::InvalidInput`] carrying `t_end`; the
+    /// refused with [`StepError::InvalidInput`] carrying `t_end`; the
     /// rest is checked as [`run`](Self::run) checks it.
     ///
     /// ```
-    /// use geoshake_runtime::particles::{generate, Options, ParticleError, Rattle};
+    /// use geoshake_runtime::{particles::{generate, Options, Rattle}, StepError};
     /// let (system, mut state) = generate::chain(4, 7).unwrap();
     /// let mut rattle = Rattle::new(system, 0.5, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();
     /// let (traj, _) = rattle.run_to(&mut state, 2.0, 1).into_result().unwrap();
     /// assert_eq!(traj.time(4), 2.0);
     /// let out = rattle.run_to(&mut state, f64::NAN, 1);
-    /// assert!(matches!(out.error, Some(ParticleError::InvalidInput { value, .. }) if value.is_nan()));
+    /// assert!(matches!(out.error, Some(StepError::InvalidInput { value, .. }) if value.is_nan()));
     /// ```
     pub fn run_to(&mut self, state: &mut ParticleState, t_end: f64, stride: u64) -> RunOutcome {
         let n = ((t_end - state.time) / self.step_size()).round();
@@ -182,7 +183,7 @@ impl Rattle {
             return RunOutcome {
                 trajectory: Trajectory::new(state.q.len()),
                 summary: RunSummary::default(),
-                error: Some(ParticleError::InvalidInput { what, value: t_end }),
+                error: Some(StepError::InvalidInput { what, value: t_end }),
             };
         }
         // (n ≤ 2^53 here, or NaN from a NaN start time, which `run`

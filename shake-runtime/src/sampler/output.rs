@@ -91,6 +91,7 @@ impl Rejection {
     pub fn of(e: &StepError) -> Rejection {
         match e {
             StepError::NewtonNotConverged { .. }
+            | StepError::AtMember { .. }
             | StepError::SingularShakeJacobian { .. }
             | StepError::NotOnConstraint { .. } => Rejection::Newton,
             StepError::FibreJump { .. } | StepError::BranchJump { .. } => Rejection::Jump,
@@ -101,7 +102,11 @@ impl Rejection {
             // The sampler checks its inputs before the first transition,
             // so these cannot come from a step; should one come, it is
             // still a rejection, never a panic.
-            StepError::InvalidInput { .. } | StepError::Storage { .. } => Rejection::NonFinite,
+            StepError::InvalidInput { .. }
+            | StepError::Shape { .. }
+            | StepError::Topology(_)
+            | StepError::Solver { .. }
+            | StepError::Storage { .. } => Rejection::NonFinite,
         }
     }
 }

@@ -4,6 +4,7 @@
 
 use super::{Reader, RecordError};
 use crate::error::{SolveError, Stage, StepError};
+use crate::particles::TopologyError;
 
 pub(super) fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
     let b = f64::to_bits;
@@ -17,6 +18,35 @@ pub(super) fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             pack_str(what, w);
         }
         StepError::Storage { step, states, dof } => w.extend([11, step, states, dof as u64]),
+        StepError::Shape {
+            what,
+            got,
+            expected,
+        } => {
+            w.extend([12, got as u64, expected as u64]);
+            pack_str(what, w);
+        }
+        StepError::AtMember {
+            stage,
+            step,
+            t,
+            ref family,
+            member,
+            source,
+        } => {
+            w.extend([13, stage_code(stage), step, b(t), member as u64]);
+            pack_str(family, w);
+            pack_solve(Some(source), w);
+        }
+        StepError::Solver { solver, ref why } => {
+            w.push(14);
+            pack_str(solver, w);
+            pack_str(why, w);
+        }
+        StepError::Topology(ref e) => {
+            w.push(15);
+            pack_topology(e, w);
+        }
         StepError::NonFinite {
             what,
             step,
@@ -170,6 +200,36 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
                 source,
             }
         }
+        12 => {
+            let (got, expected) = (r.index("got")?, r.index("expected")?);
+            StepError::Shape {
+                what: r.string()?,
+                got,
+                expected,
+            }
+        }
+        13 => {
+            let (stage, step, t) = (r.stage()?, r.word()?, r.float()?);
+            let member = r.index("member")?;
+            let family = r.string()?.to_string();
+            let source = unpack_solve(r)?.ok_or(RecordError::Corrupted {
+                what: "solve error",
+                value: 13,
+            })?;
+            StepError::AtMember {
+                stage,
+                step,
+                t,
+                family,
+                member,
+                source,
+            }
+        }
+        14 => StepError::Solver {
+            solver: r.string()?,
+            why: r.string()?.to_string(),
+        },
+        15 => StepError::Topology(unpack_topology(r)?),
         11 => StepError::Storage {
             step: r.word()?,
             states: r.word()?,
@@ -239,6 +299,147 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
         }
     };
     Ok(Some(e))
+}
+
+/// A topology error as its kind, its numbers and its texts (family first).
+fn pack_topology(e: &TopologyError, w: &mut Vec<u64>) {
+    let family = match e {
+        TopologyError::RowShape {
+            family,
+            member,
+            what,
+            got,
+            expected,
+        } => {
+            w.extend([0, *member as u64, *got as u64, *expected as u64]);
+            pack_str(what, w);
+            family
+        }
+        TopologyError::RepeatedParticle {
+            family,
+            member,
+            particle,
+        } => {
+            w.extend([1, *member as u64, *particle as u64]);
+            family
+        }
+        TopologyError::DanglingParticle {
+            family,
+            member,
+            particle,
+            particles,
+        } => {
+            w.extend([2, *member as u64, *particle as u64, *particles as u64]);
+            family
+        }
+        TopologyError::DuplicateMember {
+            family,
+            first,
+            second,
+        } => {
+            w.extend([3, *first as u64, *second as u64]);
+            family
+        }
+        TopologyError::BadValue {
+            family,
+            member,
+            value,
+            why,
+        } => {
+            w.extend([4, *member as u64, value.to_bits()]);
+            pack_str(why, w);
+            family
+        }
+        TopologyError::TooManyConstraints {
+            family,
+            member,
+            constraints,
+            coordinates,
+        } => {
+            w.extend([5, *member as u64, *constraints as u64, *coordinates as u64]);
+            family
+        }
+        TopologyError::Dimension {
+            family,
+            stencil,
+            system,
+        } => {
+            w.extend([6, *stencil as u64, *system as u64]);
+            family
+        }
+    };
+    pack_str(family, w);
+}
+
+fn unpack_topology(r: &mut Reader) -> Result<TopologyError, RecordError> {
+    let kind = r.word()?;
+    let mut e = match kind {
+        0 => {
+            let (member, got, expected) =
+                (r.index("member")?, r.index("got")?, r.index("expected")?);
+            TopologyError::RowShape {
+                what: r.string()?,
+                family: String::new(),
+                member,
+                got,
+                expected,
+            }
+        }
+        1 => TopologyError::RepeatedParticle {
+            member: r.index("member")?,
+            particle: r.index("particle")?,
+            family: String::new(),
+        },
+        2 => TopologyError::DanglingParticle {
+            member: r.index("member")?,
+            particle: r.index("particle")?,
+            particles: r.index("particles")?,
+            family: String::new(),
+        },
+        3 => TopologyError::DuplicateMember {
+            first: r.index("first")?,
+            second: r.index("second")?,
+            family: String::new(),
+        },
+        4 => {
+            let (member, value) = (r.index("member")?, r.float()?);
+            TopologyError::BadValue {
+                why: r.string()?,
+                family: String::new(),
+                member,
+                value,
+            }
+        }
+        5 => TopologyError::TooManyConstraints {
+            member: r.index("member")?,
+            constraints: r.index("constraints")?,
+            coordinates: r.index("coordinates")?,
+            family: String::new(),
+        },
+        6 => TopologyError::Dimension {
+            stencil: r.index("stencil")?,
+            system: r.index("system")?,
+            family: String::new(),
+        },
+        k => {
+            return Err(RecordError::Corrupted {
+                what: "topology error",
+                value: k,
+            })
+        }
+    };
+    // The family's name comes last (its length is known only there).
+    let name = r.string()?.to_string();
+    match &mut e {
+        TopologyError::RowShape { family, .. }
+        | TopologyError::RepeatedParticle { family, .. }
+        | TopologyError::DanglingParticle { family, .. }
+        | TopologyError::DuplicateMember { family, .. }
+        | TopologyError::BadValue { family, .. }
+        | TopologyError::TooManyConstraints { family, .. }
+        | TopologyError::Dimension { family, .. } => *family = name,
+    }
+    Ok(e)
 }
 
 const STAGES: [Stage; 5] = [
