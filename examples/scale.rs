@@ -125,7 +125,7 @@ fn run(case: &Case, tol: f64) {
     let steps = arg("--steps").unwrap_or((100_000_000 / m.max(1)).clamp(20, 1000) as u64);
     let repeats = arg::<usize>("--repeats").unwrap_or(1).max(1);
     let warm = (steps / 20).max(2);
-    let warmup = rattle.run(&mut state, warm, 0);
+    let warmup = rattle.run_in_place(&mut state, warm);
     if let Some(e) = warmup.error {
         println!("scale system={} n={} error=\"{e}\"", case.system, case.n);
         return;
@@ -136,20 +136,19 @@ fn run(case: &Case, tol: f64) {
     let mut out = None;
     for _ in 0..repeats {
         let (t, c) = (Instant::now(), thread_cpu_seconds());
-        out = Some(rattle.run(&mut state, steps, steps));
+        out = Some(rattle.run_in_place(&mut state, steps));
         timings.push((thread_cpu_seconds() - c, t.elapsed().as_secs_f64()));
     }
     timings.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (secs, wall) = timings[timings.len() / 2];
     let out = out.expect("at least one repeat");
-    let traj_bytes = out.trajectory.bytes() as f64 / out.trajectory.len().max(1) as f64;
-    let (_, summary) = match out.into_result() {
-        Ok(r) => r,
-        Err((_, e)) => {
-            println!("scale system={} n={} error=\"{e}\"", case.system, case.n);
-            return;
-        }
-    };
+    let traj_bytes = out.trajectory.state_bytes() as f64 / out.trajectory.len().max(1) as f64;
+    if let Some(e) = out.error {
+        println!("scale system={} n={} error=\"{e}\"", case.system, case.n);
+        return;
+    }
+    let summary = out.summary;
+    let measured = |x: Option<f64>| x.unwrap_or(f64::NAN);
     let us = secs * 1e6 / steps as f64;
     let wall_us = wall * 1e6 / steps as f64;
     let len_err = rattle
@@ -189,8 +188,8 @@ fn run(case: &Case, tol: f64) {
         rattle.options().tol,
         us,
         us * 1e3 / m as f64,
-        summary.max_rel_g,
-        summary.max_hidden,
+        measured(summary.max_residual),
+        measured(summary.max_hidden),
         state_b + work_b + sys_b + traj_bytes / m as f64,
         rattle.solver_name(),
         steps,

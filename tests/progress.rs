@@ -47,3 +47,25 @@ fn a_run_that_fails_before_its_first_step_leaves_the_bar_alone() {
     assert_eq!(progress.bar().position(), 0);
     assert!(!progress.bar().is_finished());
 }
+
+/// A particle run (1000 rigid waters) drives the same bar through the same
+/// hook: the one driver runs both engines.
+#[test]
+fn the_bar_follows_a_particle_run() {
+    use geoshake::particles::{generate, Options, Rattle};
+    let (system, mut state) = generate::water(1000, 12345).unwrap();
+    let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
+    rattle.project(&mut state).unwrap();
+    generate::set_temperature(rattle.system(), &mut state, 300.0);
+    let mut progress = Progress::hidden("water");
+    let out = rattle
+        .run(&state, Stop::Steps(40))
+        .stride(40)
+        .on_step(progress.hook())
+        .execute();
+    assert!(out.error.is_none(), "{:?}", out.error);
+    let bar = progress.bar();
+    assert_eq!((bar.length(), bar.position()), (Some(40), 40));
+    assert!(bar.is_finished());
+    assert_eq!(out.summary.steps, 40);
+}

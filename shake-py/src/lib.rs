@@ -451,6 +451,7 @@ where
             Err(e) => {
                 return RunOutcome {
                     trajectory: Default::default(),
+                    summary: Default::default(),
                     error: Some(e),
                 }
             }

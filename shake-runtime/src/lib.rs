@@ -119,7 +119,7 @@ pub use ensemble::{ensemble, run_ensemble};
 pub use error::{SolveError, Stage, StepError};
 pub use fibre::FibreFlow;
 pub use integrator::{
-    Integrator, Method, Options, Run, RunOutcome, StepEvent, StepInfo, Stop, Trajectory,
+    Integrator, Method, Options, Run, RunOutcome, RunSummary, StepEvent, StepInfo, Stop, Trajectory,
 };
 /// The MPI bindings (rsmpi) the distributed ensembles use, for initialising
 /// MPI and naming communicators.

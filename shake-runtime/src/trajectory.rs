@@ -142,7 +142,7 @@ impl Trajectory {
     /// before the first step, not an abort of the process when the buffer
     /// grows. `stride` is at least 1 (the driver refuses 0 before).
     pub(crate) fn for_run(
-        (dof, names): (usize, Names),
+        (dof, names): (usize, Option<Names>),
         diagnostics: Option<usize>,
         t0: f64,
         h: f64,
@@ -155,7 +155,9 @@ impl Trajectory {
             value: l.value(),
         })?;
         let mut traj = Trajectory::new(dof, t0, h, stride, 0);
-        traj.set_names(names);
+        if let Some(names) = names {
+            traj.set_names(names);
+        }
         if let Some(m) = diagnostics {
             traj.set_constraints(m);
         }

@@ -12,7 +12,7 @@ use geoshake_runtime::particles::{
 };
 use geoshake_runtime::validate::{MAX_ITERATIONS, MAX_STEPS, MIN_RELATIVE_TOLERANCE};
 use geoshake_runtime::{
-    examples::Pendulum, Integrator, State, StateError, StepError, Stop, StormerVerlet,
+    examples::Pendulum, Integrator, RunOutcome, State, StateError, StepError, Stop, StormerVerlet,
 };
 
 // ---------------------------------------------------------------------------
@@ -147,13 +147,13 @@ fn dimer_state(moving: bool) -> ParticleState {
 
 /// The run was refused before any step: `InvalidInput` with this message
 /// fragment, nothing stored, no step taken.
-fn refused(out: geoshake_runtime::particles::RunOutcome, state: &ParticleState, what: &str) -> f64 {
+fn refused(out: RunOutcome, what: &str) -> f64 {
     assert!(
         out.trajectory.is_empty(),
         "stored {} states",
         out.trajectory.len()
     );
-    assert_eq!((out.summary.steps, state.step()), (0, 0));
+    assert_eq!(out.summary.steps, 0);
     match out.error {
         Some(StepError::InvalidInput { what: w, value }) if w.contains(what) => value,
         other => panic!("expected InvalidInput ({what}), got {other:?}"),
@@ -166,12 +166,15 @@ fn particle_run_of_u64_max_steps_is_refused_not_aborted() {
     // 0, nothing was reserved, and the run grew its buffer until the
     // allocator aborted the process.
     let mut rattle = dimer(0.01, Options::default()).unwrap();
-    let mut state = dimer_state(true);
-    let out = rattle.run(&mut state, u64::MAX, 1);
-    assert_eq!(refused(out, &state, "2^53 steps"), u64::MAX as f64);
+    let state = dimer_state(true);
+    let out = rattle.run(&state, Stop::Steps(u64::MAX)).execute();
+    assert_eq!(refused(out, "2^53 steps"), u64::MAX as f64);
     // Without storage too: it would never have returned.
-    let out = rattle.run(&mut state, u64::MAX, 0);
-    assert_eq!(refused(out, &state, "2^53 steps"), u64::MAX as f64);
+    let out = rattle
+        .run(&state, Stop::Steps(u64::MAX))
+        .store(false)
+        .execute();
+    assert_eq!(refused(out, "2^53 steps"), u64::MAX as f64);
 }
 
 #[test]
@@ -179,9 +182,9 @@ fn particle_storage_that_does_not_fit_is_a_typed_error() {
     // 2^53 states of 12 numbers each: counted exactly, refused by the
     // reservation.
     let mut rattle = dimer(0.01, Options::default()).unwrap();
-    let mut state = dimer_state(true);
-    let out = rattle.run(&mut state, MAX_STEPS - 1, 1);
-    assert!(out.trajectory.is_empty() && state.step() == 0);
+    let state = dimer_state(true);
+    let out = rattle.run(&state, Stop::Steps(MAX_STEPS - 1)).execute();
+    assert!(out.trajectory.is_empty() && out.summary.steps == 0);
     assert_eq!(
         out.error,
         Some(StepError::Storage {
@@ -195,22 +198,22 @@ fn particle_storage_that_does_not_fit_is_a_typed_error() {
 #[test]
 fn particle_run_to_far_or_non_finite_stop_time_is_refused() {
     let mut rattle = dimer(0.01, Options::default()).unwrap();
-    let mut state = dimer_state(true);
-    // 1e302 steps: aborted (stride 1) or never returned (stride 0).
-    for stride in [1, 0] {
-        let out = rattle.run_to(&mut state, 1e300, stride);
-        assert_eq!(refused(out, &state, "more than 2^53 steps"), 1e300);
+    let state = dimer_state(true);
+    // 1e302 steps: aborted (stored) or never returned (not stored).
+    for store in [true, false] {
+        let out = rattle.run(&state, Stop::Time(1e300)).store(store).execute();
+        assert_eq!(refused(out, "more than 2^53 steps"), 1e302);
     }
-    // NaN and ∞ returned Ok with 0 steps.
-    let out = rattle.run_to(&mut state, f64::NAN, 1);
-    assert!(refused(out, &state, "stop time must be finite").is_nan());
-    for t_end in [f64::INFINITY, f64::NEG_INFINITY] {
-        let out = rattle.run_to(&mut state, t_end, 1);
-        assert_eq!(refused(out, &state, "stop time must be finite"), t_end);
+    // NaN and ±∞ returned Ok with 0 steps; a time before the start too.
+    for t_end in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0] {
+        let out = rattle.run(&state, Stop::Time(t_end)).execute();
+        let value = refused(out, "stop time must lie in the direction of h");
+        assert_eq!(value.to_bits(), t_end.to_bits());
     }
     // A reachable stop time still runs.
-    let (traj, summary) = rattle.run_to(&mut state, 0.05, 1).into_result().unwrap();
-    assert_eq!((summary.steps, traj.len()), (5, 6));
+    let out = rattle.run(&state, Stop::Time(0.05)).execute();
+    assert_eq!((out.summary.steps, out.trajectory.len()), (5, 6));
+    assert!(out.error.is_none());
 }
 
 #[test]
@@ -219,8 +222,8 @@ fn particle_non_finite_start_time_is_refused() {
     for t0 in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
         let mut rattle = dimer(0.01, Options::default()).unwrap();
         let mut state = dimer_state(true).with_time(t0);
-        let out = rattle.run(&mut state, 3, 1);
-        let value = refused(out, &state, "start time must be finite");
+        let out = rattle.run(&state, Stop::Steps(3)).execute();
+        let value = refused(out, "start time must be finite");
         assert!(value.to_bits() == t0.to_bits(), "{value} for {t0}");
         // A single step refuses it too, and leaves the state alone.
         match rattle.step(&mut state) {
@@ -236,14 +239,18 @@ fn particle_run_whose_last_time_overflows_is_refused() {
     // h = f64::MAX, at rest: every step succeeds, and the times were
     // 0, 1.8e308, ∞, ∞.
     let mut rattle = dimer(f64::MAX, Options::default()).unwrap();
-    let mut state = dimer_state(false);
-    let out = rattle.run(&mut state, 3, 1);
+    let state = dimer_state(false);
+    let out = rattle.run(&state, Stop::Steps(3)).execute();
     assert_eq!(
-        refused(out, &state, "t0 + k·h of the last step must be finite"),
+        refused(out, "t0 + k·h of the last step must be finite"),
         f64::INFINITY
     );
     // One step ends at f64::MAX: finite, allowed.
-    let (traj, _) = rattle.run(&mut state, 1, 1).into_result().unwrap();
+    let traj = rattle
+        .run(&state, Stop::Steps(1))
+        .execute()
+        .into_result()
+        .unwrap();
     assert_eq!(traj.time(1), f64::MAX);
 }
 
@@ -274,9 +281,14 @@ fn particle_tolerance_below_round_off_is_refused() {
         },
     )
     .unwrap();
-    let mut state = dimer_state(true);
-    let (_, summary) = rattle.run(&mut state, 10, 1).into_result().unwrap();
-    assert!(summary.max_rel_g <= tol, "{summary:?}");
+    let state = dimer_state(true);
+    let out = rattle.run(&state, Stop::Steps(10)).execute();
+    assert!(out.error.is_none());
+    assert!(
+        out.summary.max_residual.unwrap() <= tol,
+        "{:?}",
+        out.summary
+    );
 }
 
 #[test]

@@ -39,6 +39,7 @@ mod packed_jacobian;
 mod paper_claims;
 mod paper_hopf;
 mod particles_alloc;
+mod particles_driver;
 mod particles_errors;
 mod particles_paths;
 mod particles_result_scale;

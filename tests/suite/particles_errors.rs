@@ -6,7 +6,7 @@ use geoshake::runtime::particles::{
     generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, Stencil, Table,
     TopologyError,
 };
-use geoshake::runtime::{SolveError, Stage, StepError};
+use geoshake::runtime::{SolveError, Stage, StepError, Stop};
 
 fn bonds(rows: &[(usize, usize, f64)]) -> Table {
     let mut t = Table::new(2, 1);
@@ -156,7 +156,7 @@ fn huge_step_fails_at_the_first_step() {
         generate::set_temperature(r.system(), &mut state, 300.0);
         let mut state = state.with_time(10.0);
         let before = state.clone();
-        let out = r.run(&mut state, 5, 1);
+        let out = r.run_in_place(&mut state, 5);
         let (traj, e) = out.into_result().unwrap_err();
         match e {
             StepError::AtMember {
@@ -224,7 +224,9 @@ fn newton_failure_at_step_k_returns_states_up_to_k_minus_1() {
     let mut r = Rattle::new(system, h, Options::default()).unwrap();
     let t0 = 3.0;
     let mut state = ParticleState::new(vec![0.0, 0.0, 1.0, 0.0], vec![0.0; 4]).with_time(t0);
-    let out = r.run(&mut state, 10_000, 1);
+    // Stride 3: the last good state is stored whether or not it is on it.
+    let out = r.run(&state, Stop::Steps(10_000)).stride(3).execute();
+    assert_eq!(out.summary.steps + 1, out.error.as_ref().unwrap().step());
     let (traj, e) = out.into_result().unwrap_err();
     let k = match e {
         StepError::AtMember {
@@ -255,6 +257,9 @@ fn newton_failure_at_step_k_returns_states_up_to_k_minus_1() {
     let last = traj.len() - 1;
     assert_eq!(traj.step(last), k - 1);
     assert_eq!(traj.time(last), t0 + (k - 1) as f64 * h);
+    // The same run in place ends at the same state, counted as step k − 1.
+    let e = r.run_in_place(&mut state, 10_000).error.unwrap();
+    assert_eq!(e.step(), k);
     assert_eq!(state.step(), k - 1);
     assert_eq!((traj.q(last), traj.p(last)), (state.q(), state.p()));
 }

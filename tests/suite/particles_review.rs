@@ -2,7 +2,7 @@
 //! failing case before its fix.
 
 use geoshake::runtime::particles::{generate, Options, ParticleState, Rattle, SolverChoice};
-use geoshake::runtime::StepError;
+use geoshake::runtime::{StepError, Stop};
 
 fn fresh_step(system_seed: u64, z: &ParticleState, solver: SolverChoice) -> ParticleState {
     let (sys, _) = generate::chain(40, system_seed).unwrap();
@@ -94,7 +94,7 @@ fn tiny_length_scales_are_not_silently_wrong() {
             },
         )
         .unwrap();
-        let ok = r.project(&mut z).is_ok() && r.run(&mut z, 50, 0).error.is_none();
+        let ok = r.project(&mut z).is_ok() && r.run_in_place(&mut z, 50).error.is_none();
         if ok {
             let err = generate::max_rel_length_error(&scaled, 3, z.q());
             assert!(err <= 1e-9, "{solver:?}: Ok with length error {err:e}");
@@ -152,7 +152,7 @@ fn an_unstorable_trajectory_is_refused() {
     // 2^52 states of 30 numbers: a count that fits, memory that does not
     // (more than 2^53 steps is refused before the count: see
     // shake-runtime/tests/run_limits.rs).
-    let out = r.run(&mut z, 1 << 52, 1);
+    let out = r.run(&z, Stop::Steps(1 << 52)).execute();
     assert!(matches!(
         out.error,
         Some(StepError::Storage { step: 0, .. })

@@ -30,7 +30,7 @@ use crate::system::ConstrainedSystem;
 use crate::validate;
 
 pub use crate::guard::Options;
-pub use crate::report::StepInfo;
+pub use crate::report::{RunSummary, StepInfo};
 pub use crate::run::{Run, RunOutcome, StepEvent, StepObserver, Stop};
 pub use crate::step::Method;
 pub use crate::trajectory::Trajectory;

@@ -77,8 +77,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Stepper for Integrator<S, B> {
-    fn layout(&self) -> (usize, Names) {
-        (self.system.dof(), Names::of(&self.system))
+    fn layout(&self) -> (usize, Option<Names>) {
+        (self.system.dof(), Some(Names::of(&self.system)))
     }
 
     fn constraint_count(&self) -> usize {
@@ -154,8 +154,8 @@ impl<S: ConstrainedSystem, B: BaseMap> Stepper for Integrator<S, B> {
     #[inline]
     fn advance(
         &mut self,
-        q: &mut [f64],
-        p: &mut [f64],
+        q: &mut Vec<f64>,
+        p: &mut Vec<f64>,
         per_step: bool,
         k: u64,
         t: f64,

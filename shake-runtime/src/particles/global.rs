@@ -7,7 +7,7 @@ use super::graph::{self, Numbering};
 use super::plan::ClusterArgs;
 use super::ParticleSystem;
 use crate::error::{SolveError, Stage, StepError};
-use crate::report::StepReport;
+use crate::report::StepInfo;
 use crate::solver::SpdSolver;
 
 /// The coupled path (chains, general graphs): one simplified Newton over
@@ -188,7 +188,7 @@ impl Global {
         pn: &mut [f64],
         k: u64,
         time: f64,
-        report: &mut StepReport,
+        report: &mut StepInfo,
     ) -> Result<(), StepError> {
         // Newton along the fibre from a step, or the projection of initial
         // data onto M (no 1/h: no momenta to update).
@@ -240,9 +240,9 @@ impl Global {
                 return Err(num.error_at(system, worst_c, stage, k, time, source));
             }
             if worst <= args.tol {
-                report.max_rel_g = worst;
-                report.newton_iterations = it;
-                report.newton_total = it as u64;
+                report.residual = Some(worst);
+                report.shake_iterations = it;
+                report.shake_iterations_total = it as u64;
                 break;
             }
             if it == 0 {
@@ -287,7 +287,7 @@ impl Global {
         tol: f64,
         k: u64,
         time: f64,
-        report: &mut StepReport,
+        report: &mut StepInfo,
     ) -> Result<(), StepError> {
         let d = system.dim();
         let inv_m = system.inverse_masses();
@@ -318,7 +318,7 @@ impl Global {
         }
         if !(worst_g <= tol) {
             let source = SolveError::NotConverged {
-                iterations: report.newton_iterations,
+                iterations: report.shake_iterations,
                 residual: worst_g,
             };
             return Err(num.error_at(system, worst_c, Stage::Shake, k, time, source));
@@ -330,7 +330,7 @@ impl Global {
         if !(worst <= crate::tolerance::HIDDEN_LIMIT) {
             return Err(Self::singular(system, num, 0, Stage::Rattle, 0, k, time));
         }
-        report.max_hidden = worst;
+        report.hidden = Some(worst);
         // grad1/scale1 (at q1) become the next step's grad0/scale0.
         std::mem::swap(&mut self.grad0, &mut self.grad1);
         std::mem::swap(&mut self.scale0, &mut self.scale1);

@@ -30,6 +30,7 @@
 //! use geoshake_runtime::particles::{
 //!     stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, Table,
 //! };
+//! use geoshake_runtime::Stop;
 //!
 //! // A bent triatomic: two bonds of length 1 sharing particle 1.
 //! let mut bonds = Table::new(2, 1);
@@ -46,10 +47,12 @@
 //! // The symbolic phase: clusters, checks, solver, workspaces.
 //! let mut rattle = Rattle::new(system, 0.01, Options::default()).unwrap();
 //! rattle.project(&mut state).unwrap(); // onto M, then onto M^H
-//! let out = rattle.run(&mut state, 1000, 100); // every 100th state stored
-//! let (trajectory, summary) = out.into_result().unwrap();
-//! assert_eq!((trajectory.len(), rattle.solver_name()), (11, "clusters"));
-//! assert!(summary.max_rel_g <= 1e-10 && summary.max_hidden < 1e-12);
+//! // The engine's one driver: stride, observers, the partial trajectory on
+//! // failure, CSV and Arrow files, as for any run.
+//! let out = rattle.run(&state, Stop::Steps(1000)).stride(100).execute();
+//! assert_eq!((out.trajectory.len(), rattle.solver_name()), (11, "clusters"));
+//! let summary = out.summary;
+//! assert!(summary.max_residual.unwrap() <= 1e-10 && summary.max_hidden.unwrap() < 1e-12);
 //! ```
 //!
 //! Design, tolerances and measured costs: `docs/scale.md`.
@@ -69,14 +72,13 @@ pub mod stencils;
 mod system;
 mod table;
 
-pub use crate::report::StepReport;
+pub use crate::report::StepInfo;
 pub use error::TopologyError;
 pub use options::{Method, Options, SolverChoice};
 #[doc(hidden)]
 pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 pub use rattle::Rattle;
-pub use run::{RunOutcome, RunSummary};
-pub use state::{ParticleState, Trajectory};
+pub use state::ParticleState;
 pub use stencil::Stencil;
 pub use system::{ClusterKernel, ConstraintFamily, ParticleSystem, PotentialFamily};
 pub use table::Table;

@@ -1,6 +1,5 @@
-//! What a particle RATTLE is asked to do and what a step reports: the
-//! method, the solver for the multipliers' linear systems, the tolerances
-//! ([`Options`]) and the per-step [`StepReport`].
+//! What a particle RATTLE is asked to do: the method, the solver for the
+//! multipliers' linear systems and the tolerances ([`Options`]).
 
 use crate::error::StepError;
 use crate::tolerance::{MAX_ITERATIONS, MIN_RELATIVE_TOLERANCE};

@@ -9,8 +9,20 @@ use super::options::{Method, Options, SolverChoice};
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
 use super::{ParticleState, ParticleSystem};
 use crate::error::{SolveError, Stage, StepError};
-use crate::report::StepReport;
+use crate::report::StepInfo;
 use crate::solver::SpdSolver;
+
+/// What a particle step reports before its stages fill it in: the fields
+/// its kernels do not gather are NaN (see [`StepInfo`]).
+fn particle_report() -> StepInfo {
+    StepInfo {
+        lambda: f64::NAN,
+        condition: f64::NAN,
+        det_n: f64::NAN,
+        fold: f64::NAN,
+        ..StepInfo::default()
+    }
+}
 
 /// Unique stamps tie a state to the caches (forces, N's factor) of the
 /// solver that produced it.
@@ -47,7 +59,7 @@ enum Path {
 /// generate::set_temperature(rattle.system(), &mut state, 300.0);
 /// for _ in 0..10 {
 ///     let r = rattle.step(&mut state).unwrap();
-///     assert!(r.max_rel_g <= 1e-10 && r.max_hidden < 1e-12);
+///     assert!(r.residual.unwrap() <= 1e-10 && r.hidden.unwrap() < 1e-12);
 /// }
 /// assert_eq!(rattle.solver_name(), "clusters");
 /// assert_eq!(state.step(), 10);
@@ -65,6 +77,13 @@ pub struct Rattle {
     /// The forces in `force` are ∇V(q) of the state with this stamp.
     force_stamp: u64,
     stamp: u64,
+    /// In a run on the driver: the start time t0 and the stamp of the
+    /// state the last step made (the driver holds that state's buffers).
+    pub(super) run_t0: f64,
+    pub(super) run_stamp: u64,
+    /// The stamp of the state a run was asked to start from: a state this
+    /// solver made and nobody changed since continues with its caches.
+    pub(super) start_stamp: u64,
 }
 
 impl Rattle {
@@ -141,6 +160,9 @@ impl Rattle {
             has_potential,
             force_stamp: 0,
             stamp: 0,
+            run_t0: 0.0,
+            run_stamp: 0,
+            start_stamp: 0,
             system,
         })
     }
@@ -221,7 +243,22 @@ impl Rattle {
         self.stamp
     }
 
-    fn check_shape(&self, q: &[f64], p: &[f64]) -> Result<(), StepError> {
+    /// A run starts at t0 from the state [`run`](Self::run) was given:
+    /// the caches (forces, N's factor, ν) stay in use when that state is
+    /// the last one this solver made, so that a run continued from where
+    /// the last one stopped takes the same steps as one run.
+    pub(super) fn run_from(&mut self, t0: f64) {
+        self.run_t0 = t0;
+        self.run_stamp = std::mem::take(&mut self.start_stamp);
+    }
+
+    /// The stamp of the state the last successful step made (0 when the
+    /// last step failed or the caches were overwritten since).
+    pub(super) fn last_stamp(&self) -> u64 {
+        self.stamp
+    }
+
+    pub(super) fn check_shape(&self, q: &[f64], p: &[f64]) -> Result<(), StepError> {
         let d = self.qn.len();
         for (what, got) in [("q", q.len()), ("p", p.len())] {
             if got != d {
@@ -238,7 +275,7 @@ impl Rattle {
     /// `Ok` when every entry of `v` is finite, else [`StepError::NonFinite`]
     /// at step k naming `what` and the entry of z = (q, p) it is (`v` holds
     /// q, or p or a force on p when `offset` = d).
-    fn not_finite(
+    pub(super) fn not_finite(
         step: u64,
         time: f64,
         what: &'static str,
@@ -296,7 +333,7 @@ impl Rattle {
     /// One step of the method from `state` (step k − 1 at t0 + (k−1)h) to
     /// step k at t0 + k·h, in place. On failure the state is left as it was
     /// and the error names step k and time t0 + k·h.
-    pub fn step(&mut self, state: &mut ParticleState) -> Result<StepReport, StepError> {
+    pub fn step(&mut self, state: &mut ParticleState) -> Result<StepInfo, StepError> {
         self.check_shape(&state.q, &state.p)?;
         let k = state.step + 1;
         let time = state.t0 + k as f64 * self.h;
@@ -335,7 +372,7 @@ impl Rattle {
                 self.qn[c] = state.q[c] + w * pt;
             }
         }
-        let mut report = StepReport::default();
+        let mut report = particle_report();
         // The position stage.
         self.position_stage(
             &state.q,
@@ -356,8 +393,12 @@ impl Rattle {
                 *p -= half * f;
             }
         }
-        if self.options.method == Method::Rattle && !self.fused() {
-            self.velocity_stage(k, time, &mut report)?;
+        if self.options.method == Method::Rattle {
+            if !self.fused() {
+                self.velocity_stage(k, time, &mut report)?;
+            }
+            // One linear solve with N = G M⁻¹ Gᵀ.
+            report.rattle_iterations = 1;
         }
         Self::not_finite(k, time, "state", &self.qn, 0)?;
         Self::not_finite(k, time, "state", &self.pn, self.qn.len())?;
@@ -386,7 +427,7 @@ impl Rattle {
     /// reached by Newton along M⁻¹ G(q)ᵀ (the fibre direction), then
     /// p ← p − G(q)ᵀ μ with G(q) M⁻¹ p = 0. p is projected even for SHAKE.
     /// Errors report step 0 and the state's time.
-    pub fn project(&mut self, state: &mut ParticleState) -> Result<StepReport, StepError> {
+    pub fn project(&mut self, state: &mut ParticleState) -> Result<StepInfo, StepError> {
         self.check_shape(&state.q, &state.p)?;
         // The projection overwrites N's factor, G and ν: no state may count
         // as "continued" afterwards (a step of another state would reuse
@@ -397,9 +438,10 @@ impl Rattle {
         Self::not_finite(k, time, "initial state", &state.p, state.q.len())?;
         self.qn.copy_from_slice(&state.q);
         self.pn.copy_from_slice(&state.p);
-        let mut report = StepReport::default();
+        let mut report = particle_report();
         self.position_stage(&state.q, 0, false, 0.0, k, time, &mut report)?;
         self.velocity_stage(k, time, &mut report)?;
+        report.rattle_iterations = 1;
         std::mem::swap(&mut state.q, &mut self.qn);
         std::mem::swap(&mut state.p, &mut self.pn);
         state.stamp = 0;
@@ -416,7 +458,7 @@ impl Rattle {
         inv_h: f64,
         k: u64,
         time: f64,
-        report: &mut StepReport,
+        report: &mut StepInfo,
     ) -> Result<(), StepError> {
         let stage = if inv_h != 0.0 {
             Stage::Shake
@@ -460,10 +502,11 @@ impl Rattle {
                         return Err(self.cluster_error(f, e, stage, k, time));
                     }
                 }
-                report.max_rel_g = rep.max_rel;
-                report.max_hidden = rep.max_hidden;
-                report.newton_iterations = rep.max_iter;
-                report.newton_total = rep.iterations;
+                report.residual = Some(rep.max_rel);
+                // (Measured here when the velocity stage ran inside.)
+                report.hidden = fuse.then_some(rep.max_hidden);
+                report.shake_iterations = rep.max_iter;
+                report.shake_iterations_total = rep.iterations;
                 Ok(())
             }
             Path::Global(g) => {
@@ -488,7 +531,7 @@ impl Rattle {
         &mut self,
         k: u64,
         time: f64,
-        report: &mut StepReport,
+        report: &mut StepInfo,
     ) -> Result<(), StepError> {
         match &mut self.path {
             Path::Clusters { plans, .. } => {
@@ -504,7 +547,7 @@ impl Rattle {
                         return Err(self.cluster_error(f, e, Stage::Rattle, k, time));
                     }
                 }
-                report.max_hidden = rep.max_hidden;
+                report.hidden = Some(rep.max_hidden);
                 Ok(())
             }
             Path::Global(g) => g.velocity_stage(

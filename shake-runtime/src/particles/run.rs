@@ -1,194 +1,215 @@
-//! The driver: many steps, a stride, one contiguous trajectory, and the
-//! partial trajectory on failure.
+//! A particle system's run on the engine's one driver: [`Rattle`] is a
+//! [`Stepper`], so a particle run has the dense path's [`Run`] builder
+//! (stride, start time, observers, `on_step`), its [`Trajectory`], its
+//! [`RunOutcome`] with the partial trajectory on failure, and everything
+//! built on them (CSV and Arrow files, plots, progress bars).
 
-use std::num::NonZeroU64;
-
-use super::{ParticleState, Rattle, Trajectory};
+use super::{Method, ParticleState, Rattle};
+use crate::diagnostics::Accumulator;
 use crate::error::StepError;
-use crate::tolerance::{check_run, stored_states, MAX_STEPS};
-
-/// What a run measured over its steps.
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
-pub struct RunSummary {
-    /// Steps done.
-    pub steps: u64,
-    /// Largest relative constraint residual of any step.
-    pub max_rel_g: f64,
-    /// Largest relative hidden-constraint residual of any step.
-    pub max_hidden: f64,
-    /// Largest Newton iteration count of any step.
-    pub max_newton_iterations: usize,
-    /// Newton iterations summed over steps (and over clusters on the
-    /// cluster path).
-    pub newton_iterations: u64,
-}
-
-/// A run's result: the stored states, what the steps measured, and the
-/// error that stopped it early, if any.
-#[derive(Clone, Debug)]
-pub struct RunOutcome {
-    /// States at every step that is a multiple of the stride (including the
-    /// start when it is one), up to the last successful step.
-    pub trajectory: Trajectory,
-    /// Measured over the successful steps.
-    pub summary: RunSummary,
-    /// The failure (step k, time t0 + k·h) that ended the run.
-    pub error: Option<StepError>,
-}
-
-impl RunOutcome {
-    /// The trajectory and summary, or the partial trajectory with the error.
-    #[allow(clippy::result_large_err)]
-    pub fn into_result(self) -> Result<(Trajectory, RunSummary), (Trajectory, StepError)> {
-        match self.error {
-            None => Ok((self.trajectory, self.summary)),
-            Some(e) => Err((self.trajectory, e)),
-        }
-    }
-}
+use crate::report::StepInfo;
+use crate::run::lane::Lane;
+use crate::run::stepper::{Projection, Stepper};
+use crate::run::{Run, RunOutcome, Stop};
+use crate::state::State;
+use crate::trajectory::{Names, Trajectory};
 
 impl Rattle {
-    /// Takes `steps` steps from `state` (in place), storing every state
-    /// whose step index is a multiple of `stride` (`stride = 0`: none) in one
-    /// buffer reserved up front. Stops at the first failing step k: the
-    /// error carries k and t0 + k·h, `state` is left at step k − 1, and the
-    /// trajectory holds the states stored up to k − 1.
+    /// A run from `state` until `stop`, starting at the state's time;
+    /// configure it with [`Run::stride`], [`Run::observe`], … and start it
+    /// with [`Run::execute`]. The state is copied: the run leaves it as it
+    /// was, and its last state is the trajectory's last.
     ///
-    /// Before any step the request is checked as a whole, as the dense
-    /// driver checks its own: the start time finite, the last step index at
-    /// most [`MAX_STEPS`](crate::validate::MAX_STEPS) and its time
-    /// t0 + k·h finite ([`StepError::InvalidInput`]), and the states to
-    /// store counted without overflow and reserved
-    /// ([`StepError::Storage`] when they do not fit).
+    /// Every step is the method's own (RATTLE's velocity stage is part of
+    /// the step); the start state is taken as given, so bring initial data
+    /// onto M and M^H first with [`project`](Self::project). Before the
+    /// first step the request is checked as a whole (the start time, the
+    /// number of steps and the last time t0 + n·h, the stride, the states
+    /// to store: [`StepError::InvalidInput`], [`StepError::Storage`]) and
+    /// the state's shape and entries ([`StepError::Shape`],
+    /// [`StepError::NonFinite`]). A step that fails at k ends the run with
+    /// the states up to k − 1 stored, the last one always.
     ///
     /// ```
-    /// use geoshake_runtime::{particles::{generate, Options, Rattle}, StepError};
+    /// use geoshake_runtime::particles::{generate, Options, Rattle};
+    /// use geoshake_runtime::{Stop, StepError};
     /// let (system, mut state) = generate::chain(20, 7).unwrap();
     /// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();
     /// generate::set_temperature(rattle.system(), &mut state, 300.0);
-    /// let out = rattle.run(&mut state, 100, 10);
-    /// let (traj, summary) = out.into_result().unwrap();
+    /// let out = rattle.run(&state, Stop::Steps(100)).stride(10).execute();
+    /// assert!(out.error.is_none());
+    /// let traj = &out.trajectory;
     /// assert_eq!((traj.len(), traj.step(10)), (11, 100));
-    /// assert!(summary.max_rel_g <= 1e-10);
+    /// assert!(out.summary.max_residual.unwrap() <= 1e-10);
     /// // More steps than f64 can count exactly: refused before the first.
-    /// let out = rattle.run(&mut state, u64::MAX, 1);
+    /// let out = rattle.run(&state, Stop::Steps(u64::MAX)).execute();
     /// assert!(matches!(out.error, Some(StepError::InvalidInput { .. })));
-    /// assert_eq!(state.step(), 100);
     /// ```
-    pub fn run(&mut self, state: &mut ParticleState, steps: u64, stride: u64) -> RunOutcome {
-        let mut trajectory = Trajectory::new(state.q.len());
-        let summary = RunSummary::default();
-        let refuse = |trajectory, e| RunOutcome {
-            trajectory,
-            summary,
-            error: Some(e),
-        };
-        let first = state.step;
-        let last = match check_run(state.t0, self.step_size(), first, steps) {
-            Ok(last) => last,
-            Err(l) => {
-                let e = StepError::InvalidInput {
-                    what: l.what(),
-                    value: l.value(),
-                };
-                return refuse(trajectory, e);
-            }
-        };
-        if let Some(s) = NonZeroU64::new(stride) {
-            // Reserved up front (no allocation per step); a request that
-            // cannot be stored is a typed error before the first step, not
-            // an abort of the process after hours.
-            let stored = stored_states(first, last, s, false);
-            if stored.is_none_or(|n| trajectory.try_reserve(n).is_err()) {
-                let e = StepError::Storage {
-                    step: first,
-                    states: stored.unwrap_or(u64::MAX),
-                    dof: state.q.len(),
-                };
-                return refuse(trajectory, e);
-            }
-            if first.is_multiple_of(s.get()) {
-                trajectory.push(state);
-            }
-        }
-        self.run_checked(state, steps, stride, trajectory)
-    }
-
-    /// The loop of [`run`](Self::run), once the request is checked and the
-    /// trajectory reserved.
-    fn run_checked(
+    pub fn run(
         &mut self,
-        state: &mut ParticleState,
-        steps: u64,
-        stride: u64,
-        mut trajectory: Trajectory,
-    ) -> RunOutcome {
-        let mut summary = RunSummary::default();
-        for _ in 0..steps {
-            match self.step(state) {
-                Ok(r) => {
-                    summary.steps += 1;
-                    summary.max_rel_g = summary.max_rel_g.max(r.max_rel_g);
-                    summary.max_hidden = summary.max_hidden.max(r.max_hidden);
-                    summary.max_newton_iterations =
-                        summary.max_newton_iterations.max(r.newton_iterations);
-                    summary.newton_iterations += r.newton_total;
-                    if stride > 0 && state.step.is_multiple_of(stride) {
-                        trajectory.push(state);
-                    }
-                }
-                Err(e) => {
-                    return RunOutcome {
-                        trajectory,
-                        summary,
-                        error: Some(e),
-                    }
-                }
-            }
-        }
-        RunOutcome {
-            trajectory,
-            summary,
-            error: None,
-        }
+        state: &ParticleState,
+        stop: Stop,
+    ) -> Run<'_, Self, fn(u64, f64, &State)> {
+        let z0 = State::from_slices(&state.q, &state.p);
+        self.start_stamp = state.stamp;
+        Run::new(self, z0, stop).start_time(state.time)
     }
 
-    /// Runs from `state` to time `t_end`: round((t_end − t)/h) steps, none
-    /// when `t_end` is before `t`. A `t_end` that is NaN or infinite, or
-    /// more than [`MAX_STEPS`](crate::validate::MAX_STEPS) steps away, is
-    /// refused with [`StepError::InvalidInput`] carrying `t_end`; the
-    /// rest is checked as [`run`](Self::run) checks it.
+    /// `steps` steps from `state`, leaving `state` at the last good state:
+    /// step n, or step k − 1 of a run whose step k failed (then the error
+    /// is in the outcome). The molecular-dynamics loop's call: a
+    /// [`run`](Self::run) that stores the first and the last state only.
+    /// The state's step count goes up by the steps taken and its time is
+    /// t0 + k·h again (its start time t0 kept).
     ///
     /// ```
-    /// use geoshake_runtime::{particles::{generate, Options, Rattle}, StepError};
-    /// let (system, mut state) = generate::chain(4, 7).unwrap();
-    /// let mut rattle = Rattle::new(system, 0.5, Options::default()).unwrap();
+    /// use geoshake_runtime::particles::{generate, Options, Rattle};
+    /// let (system, mut state) = generate::water(8, 1).unwrap();
+    /// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
     /// rattle.project(&mut state).unwrap();
-    /// let (traj, _) = rattle.run_to(&mut state, 2.0, 1).into_result().unwrap();
-    /// assert_eq!(traj.time(4), 2.0);
-    /// let out = rattle.run_to(&mut state, f64::NAN, 1);
-    /// assert!(matches!(out.error, Some(StepError::InvalidInput { value, .. }) if value.is_nan()));
+    /// generate::set_temperature(rattle.system(), &mut state, 300.0);
+    /// for _ in 0..3 {
+    ///     let out = rattle.run_in_place(&mut state, 10);
+    ///     assert!(out.error.is_none() && out.summary.max_residual.unwrap() <= 1e-10);
+    /// }
+    /// assert_eq!((state.step(), state.time()), (30, 60.0));
     /// ```
-    pub fn run_to(&mut self, state: &mut ParticleState, t_end: f64, stride: u64) -> RunOutcome {
-        let n = ((t_end - state.time) / self.step_size()).round();
-        let refused = if !t_end.is_finite() {
-            Some("stop time must be finite")
-        } else if n > MAX_STEPS as f64 {
-            Some("stop time needs more than 2^53 steps of size h")
-        } else {
-            None
-        };
-        if let Some(what) = refused {
-            return RunOutcome {
-                trajectory: Trajectory::new(state.q.len()),
-                summary: RunSummary::default(),
-                error: Some(StepError::InvalidInput { what, value: t_end }),
-            };
+    pub fn run_in_place(&mut self, state: &mut ParticleState, steps: u64) -> RunOutcome {
+        let out = self
+            .run(state, Stop::Steps(steps))
+            .stride(steps.max(1))
+            .execute();
+        if let Some(i) = out.trajectory.len().checked_sub(1)
+            && out.trajectory.step(i) > 0
+        {
+            state.q_mut().copy_from_slice(out.trajectory.q(i));
+            state.p_mut().copy_from_slice(out.trajectory.p(i));
+            state.step += out.trajectory.step(i);
+            state.time = state.t0 + state.step as f64 * self.step_size();
+            // The state is the last one the run's steps made (unless the
+            // run failed): the next run continues with its caches.
+            if out.error.is_none() {
+                state.stamp = self.last_stamp();
+            }
         }
-        // (n ≤ 2^53 here, or NaN from a NaN start time, which `run`
-        // refuses: the cast is exact or 0.)
-        let steps = if n > 0.0 { n as u64 } else { 0 };
-        self.run(state, steps, stride)
+        out
+    }
+}
+
+impl Stepper for Rattle {
+    fn layout(&self) -> (usize, Option<Names>) {
+        // Numbered columns: names for 10⁶ coordinates would outweigh a
+        // stored state.
+        (self.system().particles() * self.system().dim(), None)
+    }
+
+    fn constraint_count(&self) -> usize {
+        self.system().constraints()
+    }
+
+    fn step_size(&self) -> f64 {
+        Rattle::step_size(self)
+    }
+
+    fn diagnostics(&self) -> bool {
+        false
+    }
+
+    fn atomic_steps(&self) -> bool {
+        // `Rattle::step` works in its own buffers and swaps them in only
+        // on success.
+        true
+    }
+
+    fn check_start(&self, z0: &State) -> Result<(), StepError> {
+        self.check_shape(z0.q.as_slice(), z0.p.as_slice())
+    }
+
+    fn begin_run(
+        &mut self,
+        q: &mut [f64],
+        p: &mut [f64],
+        t0: f64,
+    ) -> Result<Projection, StepError> {
+        // A new state: no cache (forces, factor of N, ν) belongs to it.
+        self.run_from(t0);
+        Rattle::not_finite(0, t0, "initial state", q, 0)?;
+        Rattle::not_finite(0, t0, "initial state", p, q.len())?;
+        Ok(Projection {
+            per_step: self.options().method == Method::Rattle,
+            lazy: false,
+        })
+    }
+
+    fn lane<'a>(&'a mut self, _: &'a mut [f64], _: &'a mut [f64], _: bool, _: Lane<'a>) {
+        // No fixed-size lane: the particle step loops over its own
+        // clusters or solves the whole graph.
+    }
+
+    #[inline]
+    fn advance(
+        &mut self,
+        q: &mut Vec<f64>,
+        p: &mut Vec<f64>,
+        _per_step: bool,
+        k: u64,
+        _t: f64,
+        _show: bool,
+    ) -> Result<StepInfo, StepError> {
+        // The step works on a state that owns its buffers (and swaps its
+        // own in on success): the driver's are lent to it, not copied.
+        let mut state = ParticleState {
+            q: std::mem::take(q),
+            p: std::mem::take(p),
+            t0: self.run_t0,
+            time: 0.0,
+            step: k - 1,
+            stamp: self.run_stamp,
+        };
+        let result = self.step(&mut state);
+        *q = state.q;
+        *p = state.p;
+        // (On failure the step left the state and the caches' stamp as
+        // they were: a new stamp of 0 makes nothing count as continued.)
+        self.run_stamp = if result.is_ok() { state.stamp } else { 0 };
+        result
+    }
+
+    fn fill_leaving_lambda(&mut self, _: &mut Trajectory, _: bool) {}
+
+    fn replay(
+        &mut self,
+        _: &mut [f64],
+        _: &mut [f64],
+        from: u64,
+        _: u64,
+        _: f64,
+    ) -> (u64, Option<StepError>) {
+        // Never called: a particle run projects in every step (not lazy).
+        (from, None)
+    }
+
+    #[inline]
+    fn record<F: FnMut(u64, f64, &State)>(
+        &mut self,
+        q: &[f64],
+        p: &[f64],
+        _projected: bool,
+        k: u64,
+        t: f64,
+        _acc: &mut Accumulator,
+        traj: &mut Trajectory,
+        store: bool,
+        observer: &mut F,
+        scratch: &mut State,
+    ) -> Result<(), StepError> {
+        scratch.q.as_mut_slice().copy_from_slice(q);
+        scratch.p.as_mut_slice().copy_from_slice(p);
+        observer(k, t, scratch);
+        if store {
+            traj.push(k, q, p);
+        }
+        Ok(())
     }
 }

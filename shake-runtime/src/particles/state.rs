@@ -1,4 +1,4 @@
-//! A state of a particle system, and stored trajectories.
+//! A state of a particle system.
 
 /// Positions and momenta of n particles in R^D (`q[a * D + c]`), with the
 /// step count and time.
@@ -88,84 +88,5 @@ impl ParticleState {
     /// Bytes held (the two arrays).
     pub fn bytes(&self) -> usize {
         (self.q.capacity() + self.p.capacity()) * 8
-    }
-}
-
-/// Stored states of a run in one contiguous buffer: state j is
-/// `data[j * 2d .. (j + 1) * 2d]`, q then p (d = n·D), with its step and
-/// time. 16·d bytes per state plus 16 for step and time.
-///
-/// ```
-/// use geoshake_runtime::particles::Trajectory;
-/// let t = Trajectory::new(3);
-/// assert!(t.is_empty());
-/// ```
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Trajectory {
-    d: usize,
-    data: Vec<f64>,
-    steps: Vec<u64>,
-    times: Vec<f64>,
-}
-
-impl Trajectory {
-    /// An empty trajectory of states with d coordinates.
-    pub fn new(d: usize) -> Self {
-        Trajectory {
-            d,
-            ..Default::default()
-        }
-    }
-
-    /// Room for `states` more states; `Err` (and nothing reserved beyond
-    /// what fit) when their size overflows or the allocator refuses.
-    pub(crate) fn try_reserve(&mut self, states: u64) -> Result<(), ()> {
-        let states = usize::try_from(states).map_err(|_| ())?;
-        let numbers = states.checked_mul(2 * self.d).ok_or(())?;
-        self.data.try_reserve_exact(numbers).map_err(|_| ())?;
-        self.steps.try_reserve_exact(states).map_err(|_| ())?;
-        self.times.try_reserve_exact(states).map_err(|_| ())
-    }
-
-    pub(crate) fn push(&mut self, s: &ParticleState) {
-        self.data.extend_from_slice(&s.q);
-        self.data.extend_from_slice(&s.p);
-        self.steps.push(s.step);
-        self.times.push(s.time);
-    }
-
-    /// Stored states.
-    pub fn len(&self) -> usize {
-        self.steps.len()
-    }
-
-    /// True when nothing is stored.
-    pub fn is_empty(&self) -> bool {
-        self.steps.is_empty()
-    }
-
-    /// Positions of stored state j.
-    pub fn q(&self, j: usize) -> &[f64] {
-        &self.data[j * 2 * self.d..j * 2 * self.d + self.d]
-    }
-
-    /// Momenta of stored state j.
-    pub fn p(&self, j: usize) -> &[f64] {
-        &self.data[j * 2 * self.d + self.d..(j + 1) * 2 * self.d]
-    }
-
-    /// Step index of stored state j.
-    pub fn step(&self, j: usize) -> u64 {
-        self.steps[j]
-    }
-
-    /// Time of stored state j.
-    pub fn time(&self, j: usize) -> f64 {
-        self.times[j]
-    }
-
-    /// Bytes held.
-    pub fn bytes(&self) -> usize {
-        self.data.capacity() * 8 + self.steps.capacity() * 8 + self.times.capacity() * 8
     }
 }

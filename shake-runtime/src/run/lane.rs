@@ -29,7 +29,7 @@
 use crate::base_map::BaseMap;
 use crate::error::StepError;
 use crate::guard::Guard;
-use crate::report::StepInfo;
+use crate::report::{RunSummary, StepInfo};
 use crate::state::State;
 use crate::step::classical::{fits, fixed_step, Substep};
 use crate::step::map::StepMap;
@@ -59,6 +59,8 @@ pub(crate) struct Lane<'a> {
     /// from it on failure): the driver's `prev` and `rec`.
     pub(crate) prev: (&'a mut [f64], &'a mut [f64]),
     pub(crate) rec: (&'a mut [f64], &'a mut [f64]),
+    /// In and out: the run's summary, to which every step is added.
+    pub(crate) summary: &'a mut RunSummary,
     /// Out: how the lane ended. The driver reads this, not the hook's
     /// answer (which a hand-written hook could change).
     pub(crate) end: &'a mut LaneEnd,
@@ -176,6 +178,7 @@ fn run<S: ConstrainedSystem, const D: usize, const M: usize>(
         shown,
         prev,
         rec,
+        summary,
         end,
     } = lane;
     let h = cx.h;
@@ -208,7 +211,10 @@ fn run<S: ConstrainedSystem, const D: usize, const M: usize>(
         let on_stride = to_stride == 0 || k == last;
         let show = (lazy && on_stride).then_some(&mut *shown);
         info = match fixed_step::<S, D, M>(sys, cx, (&mut q, &mut p), k, t, show) {
-            Ok(info) => info,
+            Ok(info) => {
+                summary.add(&info);
+                info
+            }
             Err(e) => return Err(fail(end, k, last_recorded, e.at(k, t))),
         };
         if on_stride {

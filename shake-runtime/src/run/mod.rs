@@ -25,6 +25,7 @@ pub use event::{StepEvent, StepObserver};
 
 use crate::diagnostics::Accumulator;
 use crate::error::StepError;
+use crate::report::RunSummary;
 use crate::state::State;
 use crate::tolerance::MAX_STEPS;
 use crate::trajectory::Trajectory;
@@ -49,8 +50,9 @@ pub enum Stop {
     Time(f64),
 }
 
-/// The result of a run: the trajectory computed so far and, if the run
-/// stopped early, why. On an error the last good state is always stored.
+/// The result of a run: the trajectory computed so far, what its steps
+/// measured and, if the run stopped early, why. On an error the last good
+/// state is always stored.
 ///
 /// ```
 /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
@@ -63,6 +65,8 @@ pub enum Stop {
 pub struct RunOutcome {
     /// Everything stored before the run ended.
     pub trajectory: Trajectory,
+    /// What the steps taken measured (iterations, residuals).
+    pub summary: RunSummary,
     /// Why the run ended early, if it did.
     pub error: Option<StepError>,
 }
@@ -249,19 +253,22 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             mut on_step,
         } = self;
         let mut traj = Trajectory::default();
-        let fail = |traj: Trajectory, e: StepError| RunOutcome {
+        let mut summary = RunSummary::default();
+        let fail = |traj: Trajectory, summary: RunSummary, e: StepError| RunOutcome {
             trajectory: traj,
+            summary,
             error: Some(e),
         };
         if let Err(e) = integ
             .check_start(&z0)
             .and_then(|_| StepError::finite_input("start time must be finite", t0))
         {
-            return fail(traj, e);
+            return fail(traj, summary, e);
         }
         if stride == 0 {
             return fail(
                 traj,
+                summary,
                 StepError::InvalidInput {
                     what: "stride must be at least 1",
                     value: 0.0,
@@ -277,6 +284,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 if !(x >= 0.0) || !x.is_finite() {
                     return fail(
                         traj,
+                        summary,
                         StepError::InvalidInput {
                             what: "stop time must lie in the direction of h from the start time",
                             value: t_end,
@@ -288,6 +296,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 if x > MAX_STEPS as f64 {
                     return fail(
                         traj,
+                        summary,
                         StepError::InvalidInput {
                             what: "stop time needs more than 2^53 steps of size h",
                             value: x,
@@ -306,16 +315,19 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
         let diagnostics = integ.diagnostics().then(|| integ.constraint_count());
         traj = match Trajectory::for_run((dof, names), diagnostics, t0, h, n, stride, store) {
             Ok(traj) => traj,
-            Err(e) => return fail(traj, e),
+            Err(e) => return fail(traj, summary, e),
         };
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
         let mut p: Vec<f64> = z0.p.as_slice().to_vec();
+        // A stepper whose failed step leaves (q, p) as they were needs no
+        // copy of the state before each step.
+        let atomic = integ.atomic_steps();
         let mut prev_q = q.clone();
         let mut prev_p = p.clone();
         let mut scratch = z0;
         let Projection { per_step, lazy } = match integ.begin_run(&mut q, &mut p, t0) {
             Ok(projection) => projection,
-            Err(e) => return fail(traj, e),
+            Err(e) => return fail(traj, summary, e),
         };
         let mut acc = Accumulator::default();
         if let Err(e) = integ.record(
@@ -330,7 +342,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             &mut observer,
             &mut scratch,
         ) {
-            return fail(traj, e);
+            return fail(traj, summary, e);
         }
         let mut last_recorded = 0;
         // A lazily projecting RATTLE run keeps the SHAKE state of its last
@@ -356,6 +368,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 shown: &mut scratch,
                 prev: (&mut prev_q, &mut prev_p),
                 rec: (&mut rec_q, &mut rec_p),
+                summary: &mut summary,
                 end: &mut end,
             };
             // (What the lane did is read from its own record.)
@@ -367,6 +380,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 LaneEnd::Done => {
                     return RunOutcome {
                         trajectory: traj,
+                        summary,
                         error: None,
                     }
                 }
@@ -401,9 +415,11 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                             e = first.unwrap_or(e);
                         }
                         if last > last_recorded {
+                            let (before_q, before_p) =
+                                if atomic { (&q, &p) } else { (&prev_q, &prev_p) };
                             let _ = integ.record(
-                                &prev_q,
-                                &prev_p,
+                                before_q,
+                                before_p,
                                 per_step,
                                 last,
                                 t0 + last as f64 * h,
@@ -415,7 +431,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                             );
                         }
                     }
-                    return fail(traj, e);
+                    return fail(traj, summary, e);
                 }};
             }
             if let Some(e) = handed.take() {
@@ -427,7 +443,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             // the stored state of a lazy run only when a later step fails
             // past it. Neither is copied when not needed (stride 1 copies
             // nothing: every state is stored as it is made).
-            if last_recorded != k - 1 {
+            if last_recorded != k - 1 && !atomic {
                 prev_q.copy_from_slice(&q);
                 prev_p.copy_from_slice(&p);
             } else if lazy && stride > 1 {
@@ -440,6 +456,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             let info = match integ.advance(&mut q, &mut p, per_step, k, t, lazy && on_stride) {
                 Ok(info) => {
                     acc.add(&info);
+                    summary.add(&info);
                     if integ.diagnostics() && last_recorded == k - 1 {
                         integ.fill_leaving_lambda(&mut traj, per_step);
                     }
@@ -491,7 +508,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                             &mut scratch,
                         )
                     {
-                        return fail(traj, e);
+                        return fail(traj, summary, e);
                     }
                     break;
                 }
@@ -499,6 +516,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
         }
         RunOutcome {
             trajectory: traj,
+            summary,
             error: None,
         }
     }

@@ -27,8 +27,9 @@ pub(crate) struct Projection {
 /// The driver's view of an integrator (module docs).
 pub(crate) trait Stepper {
     /// The trajectory's layout: d, and the names of the coordinates and
-    /// constraints.
-    fn layout(&self) -> (usize, Names);
+    /// constraints (`None`: numbered, as for a particle system's 10⁶
+    /// coordinates).
+    fn layout(&self) -> (usize, Option<Names>);
 
     /// m, the number of constraints (the multipliers a diagnosed run keeps).
     fn constraint_count(&self) -> usize;
@@ -38,6 +39,13 @@ pub(crate) trait Stepper {
 
     /// Whether the run keeps a diagnostics record per stored state.
     fn diagnostics(&self) -> bool;
+
+    /// Whether a step that fails leaves (q, p) as they were, and storing a
+    /// state never fails (then the driver keeps no copy of the state before
+    /// each step to end a failed run with: (q, p) is that state).
+    fn atomic_steps(&self) -> bool {
+        false
+    }
 
     /// Checks h, the options and the start state's dimensions.
     fn check_start(&self, z0: &State) -> Result<(), StepError>;
@@ -54,11 +62,13 @@ pub(crate) trait Stepper {
     fn lane<'a>(&'a mut self, q: &'a mut [f64], p: &'a mut [f64], per_step: bool, lane: Lane<'a>);
 
     /// Step k, to time `t`, in place; `show`: the run will show this
-    /// state (a lazy step may make its Π where its numbers are).
+    /// state (a lazy step may make its Π where its numbers are). (q, p)
+    /// are the driver's own buffers: a stepper that computes the new state
+    /// in buffers of its own may swap them in.
     fn advance(
         &mut self,
-        q: &mut [f64],
-        p: &mut [f64],
+        q: &mut Vec<f64>,
+        p: &mut Vec<f64>,
         per_step: bool,
         k: u64,
         t: f64,

@@ -195,6 +195,7 @@ pub(crate) fn check_and_project<S: ConstrainedSystem>(
 ) -> Result<StepInfo, StepError> {
     let mut info = StepInfo {
         shake_iterations: report.iterations,
+        shake_iterations_total: report.iterations as u64,
         lambda: report.lambda,
         ..StepInfo::default()
     };
@@ -248,6 +249,7 @@ fn check_one<S: ConstrainedSystem, const D: usize>(
     } = z;
     let mut info = StepInfo {
         shake_iterations: report.iterations,
+        shake_iterations_total: report.iterations as u64,
         lambda: report.lambda,
         ..StepInfo::default()
     };
@@ -334,6 +336,7 @@ fn check_few<S: ConstrainedSystem, const D: usize, const M: usize>(
 ) -> Result<StepInfo, StepError> {
     let mut info = StepInfo {
         shake_iterations: report.iterations,
+        shake_iterations_total: report.iterations as u64,
         lambda: report.lambda,
         ..StepInfo::default()
     };

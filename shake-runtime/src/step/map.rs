@@ -105,6 +105,7 @@ impl<B: BaseMap> StepMap<B> {
         .map_err(|e| e.at(step, t))?;
         let mut info = StepInfo {
             shake_iterations: report.iterations,
+            shake_iterations_total: report.iterations as u64,
             base_iterations: report.base_iterations,
             lambda: report.lambda,
             ..StepInfo::default()

@@ -123,6 +123,7 @@ impl<B: BaseMap> Composed<B> {
                 self.lead_lambda.copy_from_slice(&self.map.ws.lambda);
             }
             total.shake_iterations += info.shake_iterations;
+            total.shake_iterations_total += info.shake_iterations_total;
             total.base_iterations += info.base_iterations;
             total.rattle_iterations += info.rattle_iterations;
             total.lambda = total.lambda.max(info.lambda);

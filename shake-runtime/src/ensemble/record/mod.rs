@@ -3,17 +3,17 @@
 //! and the resumable store of `ensemble_store`.
 
 use crate::diagnostics::DiagnosticRecord;
-use crate::integrator::{RunOutcome, Trajectory};
+use crate::integrator::{RunOutcome, RunSummary, Trajectory};
 
 mod error;
 
 use error::{pack_error, unpack_error};
 
-/// The first word of every packed record ("SHAKE", version 3: with the
-/// multipliers λ, σ of each diagnostic record, and the error variants of
-/// version 3: entry of a non-finite value, singular SHAKE Jacobian, singular
-/// N, the constraint and cause of a state off M).
-const RECORD_TAG: u64 = 0x5348_414b_4503;
+/// The first word of every packed record ("SHAKE", version 4: with the
+/// multipliers λ, σ of each diagnostic record, the error variants of both
+/// engines (a member's failure, a shape, a topology, a solver refused) and
+/// the run's summary; a record of an older version is refused by its tag).
+const RECORD_TAG: u64 = 0x5348_414b_4504;
 /// Words of one packed [`DiagnosticRecord`].
 const DIAGNOSTIC_WORDS: usize = 10;
 
@@ -116,6 +116,11 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
         );
     }
     pack_error(out.error.as_ref(), words);
+    let s = &out.summary;
+    let measured = |x: Option<f64>| [x.is_some() as u64, x.unwrap_or(0.0).to_bits()];
+    words.extend([s.steps, s.max_newton_iterations as u64, s.newton_iterations]);
+    words.extend(measured(s.max_residual));
+    words.extend(measured(s.max_hidden));
     words[start + 2] = (words.len() - start) as u64;
 }
 
@@ -127,6 +132,7 @@ pub fn pack_outcome(member: usize, out: &RunOutcome, words: &mut Vec<u64>) {
 /// use geoshake_runtime::ensemble::{pack_outcome, unpack_outcome, RecordError};
 /// let failed = RunOutcome {
 ///     trajectory: Trajectory::default(),
+///     summary: Default::default(),
 ///     error: Some(StepError::NonFinite { what: "initial state", step: 0, t: 0.0, entry: 0 }),
 /// };
 /// let mut words = Vec::new();
@@ -212,6 +218,25 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
         multipliers.extend(w.iter().map(|&x| f64::from_bits(x)));
     }
     let error = unpack_error(&mut r)?;
+    let (steps, max_newton_iterations) = (r.word()?, r.index("iterations")?);
+    let newton_iterations = r.word()?;
+    let mut measured = || -> Result<Option<f64>, RecordError> {
+        match (r.word()?, f64::from_bits(r.word()?)) {
+            (0, _) => Ok(None),
+            (1, x) => Ok(Some(x)),
+            (flag, _) => Err(RecordError::Corrupted {
+                what: "summary flag",
+                value: flag,
+            }),
+        }
+    };
+    let summary = RunSummary {
+        steps,
+        max_newton_iterations,
+        newton_iterations,
+        max_residual: measured()?,
+        max_hidden: measured()?,
+    };
     if r.at != len {
         return Err(RecordError::Corrupted {
             what: "record length",
@@ -220,7 +245,12 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
     }
     trajectory.diagnostics = diagnostics;
     trajectory.set_multipliers(m, multipliers);
-    Ok((member, RunOutcome { trajectory, error }, len))
+    let outcome = RunOutcome {
+        trajectory,
+        summary,
+        error,
+    };
+    Ok((member, outcome, len))
 }
 
 /// A cursor over the words of one record; every read is bounds-checked.
