@@ -105,6 +105,7 @@ pub fn declare(src: &str) -> Result<Declared, DeclError> {
                 .into(),
         )
     })?;
+    crate::parse::check_bracket_depth(&tokens).map_err(|e| DeclError::first(vec![e]))?;
     if parse_topology::is_particle_system(&tokens) {
         return Err(DeclError {
             message: "particle systems (run-time topologies) cannot be declared from a string \

@@ -4,7 +4,7 @@
 //! The grammar is stated in the doc comment of `constrained_system!`
 //! (`lib.rs`); this module follows it item by item.
 
-use proc_macro2::{Span, TokenTree};
+use proc_macro2::{Span, TokenStream, TokenTree};
 use syn::parse::{Parse, ParseStream};
 use syn::{
     braced, bracketed, parenthesized, token, Attribute, Ident, LitFloat, LitInt, Token, Visibility,
@@ -441,6 +441,47 @@ fn precedence(op: BinOp) -> u8 {
 /// within the 2 MiB Rust gives a spawned thread (a test's) with room to
 /// spare (rustc runs the macro, and Python its main thread, on 8 MiB).
 pub const MAX_NESTING: usize = 256;
+
+/// The deepest nesting of brackets `()`, `[]` and `{}` in a declaration:
+/// an expression's own (each bracket in an expression opens at least one
+/// level of [`MAX_NESTING`]) inside at most three of the declaration's
+/// (the struct's braces, `constraints { }`, a family's `[ ]`). Anything
+/// deeper is refused by [`check_bracket_depth`].
+pub const MAX_BRACKET_DEPTH: usize = MAX_NESTING + 3;
+
+/// Refuses tokens whose brackets nest deeper than [`MAX_BRACKET_DEPTH`], at
+/// the first bracket past it. Run on a declaration read from a string
+/// before `syn` sees it: `syn` copies the tokens into its buffer with one
+/// recursive call per bracket level, which overflows an 8 MiB stack at
+/// some 40 000 levels, before the parser's [`MAX_NESTING`] can refuse
+/// anything. This walk keeps its own stack.
+pub fn check_bracket_depth(tokens: &TokenStream) -> syn::Result<()> {
+    let mut open = vec![tokens.clone().into_iter()];
+    while let Some(level) = open.last_mut() {
+        match level.next() {
+            Some(TokenTree::Group(g)) => {
+                // `g` is at depth `open.len()` (a top-level group is at 1).
+                if open.len() > MAX_BRACKET_DEPTH {
+                    return Err(syn::Error::new(
+                        g.span_open(),
+                        format!(
+                            "expression nested too deeply: brackets `()`, `[]`, `{{}}` nest more \
+                             than {MAX_BRACKET_DEPTH} deep here, and an expression may nest at \
+                             most {MAX_NESTING} levels of parentheses, unary minus signs, `^` or \
+                             calls (split it with `let`s)"
+                        ),
+                    ));
+                }
+                open.push(g.stream().into_iter());
+            }
+            Some(_) => {}
+            None => {
+                open.pop();
+            }
+        }
+    }
+    Ok(())
+}
 
 thread_local! {
     /// The current nesting of [`parse_expr`] calls on this thread.
