@@ -266,7 +266,8 @@ use quote::quote;
 ///
 /// - one expression nests at most 256 levels (parentheses, unary minus
 ///   signs, `^` chains, calls, `sum` and `if` bodies): the parser is
-///   recursive and rustc runs it on an 8 MiB stack;
+///   recursive and rustc runs it on an 8 MiB stack; sums and products of
+///   any length are flat lists and add no level;
 /// - a `let` built on earlier `let`s is at most 1000 operations deep (the
 ///   longest chain down to q, p or a parameter); the expansion of such a
 ///   chain, with its derivatives, takes about a second;

@@ -67,6 +67,25 @@ struct Template<'a> {
     raw: bool,
 }
 
+/// `a op b` in an index expression, with the operator at `at`.
+fn int_op(op: BinOp, a: i64, b: i64, at: Span) -> Result<i64, Error> {
+    let r = match op {
+        BinOp::Add => a.checked_add(b),
+        BinOp::Sub => a.checked_sub(b),
+        BinOp::Mul => a.checked_mul(b),
+        BinOp::Div | BinOp::Rem if b == 0 => {
+            return Err(err(at, "division by zero in an index expression"))
+        }
+        BinOp::Div => a.checked_div(b),
+        BinOp::Rem => a.checked_rem(b),
+        BinOp::Pow => None,
+    };
+    r.ok_or_else(|| err(at, NOT_INT))
+}
+
+const NOT_INT: &str =
+    "expected a compile-time integer (literals and `sum` indices, with `+ - * / %`)";
+
 fn err(span: Span, msg: impl std::fmt::Display) -> Error {
     Error::new(span, msg.to_string())
 }
@@ -189,12 +208,7 @@ impl Template<'_> {
 
     /// A compile-time integer: literals and bound `sum` indices.
     fn int(&self, e: &Expr) -> Result<i64, Error> {
-        let not_int = || {
-            err(
-                e.span,
-                "expected a compile-time integer (literals and `sum` indices, with `+ - * / %`)",
-            )
-        };
+        let not_int = || err(e.span, NOT_INT);
         match &e.kind {
             ExprKind::Num(v, true) => Ok(*v as i64),
             ExprKind::Ident(id) => self
@@ -207,18 +221,14 @@ impl Template<'_> {
             ExprKind::Neg(a) => Ok(-self.int(a)?),
             ExprKind::Binary(op, a, b) => {
                 let (a, b) = (self.int(a)?, self.int(b)?);
-                let r = match op {
-                    BinOp::Add => a.checked_add(b),
-                    BinOp::Sub => a.checked_sub(b),
-                    BinOp::Mul => a.checked_mul(b),
-                    BinOp::Div | BinOp::Rem if b == 0 => {
-                        return Err(err(e.span, "division by zero in an index expression"))
-                    }
-                    BinOp::Div => a.checked_div(b),
-                    BinOp::Rem => a.checked_rem(b),
-                    BinOp::Pow => None,
-                };
-                r.ok_or_else(not_int)
+                int_op(*op, a, b, e.span)
+            }
+            ExprKind::Chain(first, links) => {
+                let mut acc = self.int(first)?;
+                for l in links {
+                    acc = int_op(l.op, acc, self.int(&l.rhs)?, l.span)?;
+                }
+                Ok(acc)
             }
             _ => Err(not_int()),
         }
@@ -356,83 +366,15 @@ impl Template<'_> {
             },
             ExprKind::Binary(op, a, b) => {
                 let (x, y) = (self.val(a)?, self.val(b)?);
-                match (op, x, y) {
-                    (BinOp::Add, Val::S(x), Val::S(y)) => Val::S(self.add2(x, y)),
-                    (BinOp::Sub, Val::S(x), Val::S(y)) => Val::S(self.sub(x, y)),
-                    (BinOp::Add | BinOp::Sub, Val::V(x), Val::V(y)) => Val::V(
-                        x.into_iter()
-                            .zip(y)
-                            .map(|(x, y)| match op {
-                                BinOp::Add => self.add2(x, y),
-                                _ => self.sub(x, y),
-                            })
-                            .collect(),
-                    ),
-                    (BinOp::Add | BinOp::Sub, _, _) => {
-                        return Err(err(e.span, "cannot add a scalar and a vector"))
-                    }
-                    (BinOp::Mul, Val::S(x), Val::S(y)) => Val::S(self.mul2(x, y)),
-                    (BinOp::Mul, Val::S(s), Val::V(v)) | (BinOp::Mul, Val::V(v), Val::S(s)) => {
-                        Val::V(v.into_iter().map(|x| self.mul2(s, x)).collect())
-                    }
-                    (BinOp::Mul, Val::V(_), Val::V(_)) => {
-                        return Err(err(
-                            e.span,
-                            "`*` between two vectors is ambiguous: write `dot(u, v)` (or \
-                             `cross(u, v)` in R^3)",
-                        ))
-                    }
-                    (BinOp::Div, x, Val::S(y)) => {
-                        if self.graph.is_zero(y) {
-                            return Err(err(b.span, "division by zero"));
-                        }
-                        match x {
-                            Val::S(x) => Val::S(self.div(x, y)),
-                            Val::V(v) => Val::V(v.into_iter().map(|x| self.div(x, y)).collect()),
-                        }
-                    }
-                    (BinOp::Div, _, Val::V(_)) => {
-                        return Err(err(b.span, "cannot divide by a vector"))
-                    }
-                    (BinOp::Rem, _, _) => {
-                        return Err(err(
-                            e.span,
-                            "`%` is only allowed in index expressions: it is not differentiable",
-                        ))
-                    }
-                    (BinOp::Pow, Val::S(x), Val::S(y)) => match self.graph.as_const(y) {
-                        Some(r) if r.is_finite() => {
-                            if r.abs() > crate::simplify::MAX_EXPONENT as f64 {
-                                return Err(err(
-                                    b.span,
-                                    format!(
-                                        "exponent too large: |{r}| is above the limit of {} \
-                                         (x^n over- or underflows f64 for every |x| outside \
-                                         [0.5, 2] there)",
-                                        crate::simplify::MAX_EXPONENT
-                                    ),
-                                ));
-                            }
-                            if self.graph.is_zero(x) && r < 0.0 {
-                                return Err(err(e.span, "division by zero: 0 to a negative power"));
-                            }
-                            Val::S(self.powf(x, r))
-                        }
-                        _ => {
-                            return Err(err(
-                                b.span,
-                                "the exponent must be a constant; write `exp(y * ln(x))` for a \
-                                 variable exponent",
-                            ))
-                        }
-                    },
-                    (BinOp::Pow, _, _) => {
-                        return Err(err(
-                            e.span,
-                            "powers are of scalars: for |u|² write `norm2(u)`",
-                        ))
-                    }
+                self.binary(*op, x, y, e.span, b)?
+            }
+            ExprKind::Chain(first, links) => {
+                let mut acc = self.val(first)?;
+                for l in links {
+                    let y = self.val(&l.rhs)?;
+                    acc = self.binary(l.op, acc, y, l.span, &l.rhs)?;
                 }
+                acc
             }
             ExprKind::Call(f, args) => self.function(f, args)?,
             ExprKind::Sum(var, lo, hi, body) => {
@@ -481,6 +423,83 @@ impl Template<'_> {
                         self.fam.name
                     ),
                 ))
+            }
+        })
+    }
+
+    /// `x op y` for the values of the operands, the operator at `at` and the
+    /// right operand written `rhs`.
+    fn binary(&mut self, op: BinOp, x: Val, y: Val, at: Span, rhs: &Expr) -> Result<Val, Error> {
+        Ok(match (op, x, y) {
+            (BinOp::Add, Val::S(x), Val::S(y)) => Val::S(self.add2(x, y)),
+            (BinOp::Sub, Val::S(x), Val::S(y)) => Val::S(self.sub(x, y)),
+            (BinOp::Add | BinOp::Sub, Val::V(x), Val::V(y)) => Val::V(
+                x.into_iter()
+                    .zip(y)
+                    .map(|(x, y)| match op {
+                        BinOp::Add => self.add2(x, y),
+                        _ => self.sub(x, y),
+                    })
+                    .collect(),
+            ),
+            (BinOp::Add | BinOp::Sub, _, _) => {
+                return Err(err(at, "cannot add a scalar and a vector"))
+            }
+            (BinOp::Mul, Val::S(x), Val::S(y)) => Val::S(self.mul2(x, y)),
+            (BinOp::Mul, Val::S(s), Val::V(v)) | (BinOp::Mul, Val::V(v), Val::S(s)) => {
+                Val::V(v.into_iter().map(|x| self.mul2(s, x)).collect())
+            }
+            (BinOp::Mul, Val::V(_), Val::V(_)) => {
+                return Err(err(
+                    at,
+                    "`*` between two vectors is ambiguous: write `dot(u, v)` (or \
+                     `cross(u, v)` in R^3)",
+                ))
+            }
+            (BinOp::Div, x, Val::S(y)) => {
+                if self.graph.is_zero(y) {
+                    return Err(err(rhs.span, "division by zero"));
+                }
+                match x {
+                    Val::S(x) => Val::S(self.div(x, y)),
+                    Val::V(v) => Val::V(v.into_iter().map(|x| self.div(x, y)).collect()),
+                }
+            }
+            (BinOp::Div, _, Val::V(_)) => return Err(err(rhs.span, "cannot divide by a vector")),
+            (BinOp::Rem, _, _) => {
+                return Err(err(
+                    at,
+                    "`%` is only allowed in index expressions: it is not differentiable",
+                ))
+            }
+            (BinOp::Pow, Val::S(x), Val::S(y)) => match self.graph.as_const(y) {
+                Some(r) if r.is_finite() => {
+                    if r.abs() > crate::simplify::MAX_EXPONENT as f64 {
+                        return Err(err(
+                            rhs.span,
+                            format!(
+                                "exponent too large: |{r}| is above the limit of {} \
+                                 (x^n over- or underflows f64 for every |x| outside \
+                                 [0.5, 2] there)",
+                                crate::simplify::MAX_EXPONENT
+                            ),
+                        ));
+                    }
+                    if self.graph.is_zero(x) && r < 0.0 {
+                        return Err(err(at, "division by zero: 0 to a negative power"));
+                    }
+                    Val::S(self.powf(x, r))
+                }
+                _ => {
+                    return Err(err(
+                        rhs.span,
+                        "the exponent must be a constant; write `exp(y * ln(x))` for a \
+                         variable exponent",
+                    ))
+                }
+            },
+            (BinOp::Pow, _, _) => {
+                return Err(err(at, "powers are of scalars: for |u|² write `norm2(u)`"))
             }
         })
     }

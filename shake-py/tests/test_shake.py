@@ -6,6 +6,9 @@ models do: the comparisons allow a few ulps of the state, far below any
 O(h) difference a wrong derivative would make.
 """
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -253,3 +256,46 @@ def test_a_constant_outside_a_function_domain_is_a_declaration_error():
     with pytest.raises(geoshake.DeclarationError) as info:
         geoshake.declare(PENDULUM.replace("gravity * q[1]", "sqrt(-1) * q[1]"), length=1.0, gravity=9.81)
     assert "sqrt" in str(info.value)
+
+
+def run_isolated(code):
+    """Runs `code` in a fresh interpreter: a crash there (a stack overflow
+    was one) fails the test instead of killing pytest."""
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=600
+    )
+
+
+def test_a_sum_of_100000_terms_is_declared():
+    # A left-deep tree of 12 000 terms overflowed the main thread's stack.
+    r = run_isolated("""
+import geoshake
+terms = " + ".join(f"q[{k % 2}]^2" for k in range(100_000))
+system = geoshake.declare(
+    "struct S { dof q[2], p[2]; hamiltonian = (p[0]^2 + p[1]^2) / 2 + "
+    + terms + "; constraints { c: q[0]^2 + q[1]^2 - 1 } }")
+print(system.hamiltonian([0.6, 0.8, 0.0, 0.0]))
+""")
+    assert r.returncode == 0, r.stderr
+    assert float(r.stdout) == pytest.approx(50_000 * (0.6**2 + 0.8**2), rel=1e-12)
+
+
+@pytest.mark.parametrize("n", [40_000, 1_000_000])
+def test_deeply_nested_parentheses_are_a_declaration_error(n):
+    # 40 000 overflowed the stack before the parser's depth check.
+    r = run_isolated(f"""
+import geoshake
+head = "struct S {{ dof q[2], p[2]; hamiltonian = (p[0]^2 + p[1]^2) / 2 + "
+try:
+    geoshake.declare(head + "(" * {n} + "q[0]" + ")" * {n} + "; }}")
+except geoshake.DeclarationError as e:
+    assert isinstance(e, geoshake.ShakeError)
+    assert "nested too deeply" in e.message, e.message
+    print(e.line, e.column - len(head))
+else:
+    raise SystemExit("declared")
+""")
+    assert r.returncode == 0, r.stderr
+    # At the first bracket past the limit of 259: the struct's braces are
+    # the first level, the first `(` the second.
+    assert r.stdout.split() == ["1", "259"]

@@ -96,6 +96,52 @@ impl DeclError {
 ///
 /// Particle systems (`particles x[3]; ...`, run-time topologies) are not
 /// declarable this way yet and are refused.
+///
+/// # Limits
+///
+/// No string overflows the stack: past each limit the declaration is
+/// refused with a [`DeclError`] at the line and column where the limit is
+/// passed.
+///
+/// - Sums and products of any length: `a + b - c` and `a * b / c % d` are
+///   read as flat lists, not as trees as deep as they are long (a sum of
+///   10⁵ terms declares in about a second).
+/// - One expression nests at most
+///   [`MAX_NESTING`](crate::parse::MAX_NESTING) = 256 levels: each
+///   parenthesis, unary minus, `^` (right-associative, so `a^b^c` nests),
+///   call, `sum` body and `if` branch is a level (a bracket inside a
+///   product inside a sum can cost up to three). The error is at the first
+///   token past the limit.
+/// - Brackets `()`, `[]`, `{}` nest at most
+///   [`MAX_BRACKET_DEPTH`](crate::parse::MAX_BRACKET_DEPTH) = 259 deep (an
+///   expression's 256 inside the struct's braces, `constraints {}` and a
+///   family's `[]`). This is checked on the tokens before they are
+///   parsed, so 10⁶ nested parentheses are refused in a fraction of a
+///   second, at the first bracket past the limit.
+/// - As in the macro: a `let` built on `let`s is at most 1000 operations
+///   deep, exponents satisfy |n| ≤ 1024, ranges have at most 10⁵ members,
+///   the `sum`s expand to at most 10⁶ terms in all, d ≤ 1024.
+///
+/// Past the parser, every pass works on the expression graph and is
+/// iterative or bounded. At these limits the recursive ones (parsing,
+/// lowering) take at most about 0.4 MiB of stack in an optimised build and
+/// 1 MiB without optimisation, so a declaration can be read on any thread
+/// with the 2 MiB Rust gives a spawned thread.
+///
+/// ```
+/// use geoshake_symbolic::{declare, parse::MAX_BRACKET_DEPTH};
+///
+/// let head = "struct S { dof q[1], p[1]; hamiltonian = p[0]^2 / 2 + ";
+/// let sum = vec!["q[0]^2"; 100_000].join(" + ");
+/// assert!(declare(&format!("{head}{sum}; }}")).is_ok());
+///
+/// let n = 100_000;
+/// let deep = format!("{head}{}q[0]{}; }}", "(".repeat(n), ")".repeat(n));
+/// let e = declare(&deep).err().unwrap();
+/// // The struct's braces are the first level, the first `(` the second.
+/// assert_eq!((e.line, e.column), (1, head.len() + MAX_BRACKET_DEPTH));
+/// assert!(e.message.contains("nested too deeply"), "{e}");
+/// ```
 pub fn declare(src: &str) -> Result<Declared, DeclError> {
     let tokens: TokenStream = src.parse().map_err(|e: proc_macro2::LexError| {
         DeclError::at(
@@ -105,6 +151,7 @@ pub fn declare(src: &str) -> Result<Declared, DeclError> {
                 .into(),
         )
     })?;
+    crate::parse::check_bracket_depth(&tokens).map_err(|e| DeclError::first(vec![e]))?;
     if parse_topology::is_particle_system(&tokens) {
         return Err(DeclError {
             message: "particle systems (run-time topologies) cannot be declared from a string \

@@ -6,7 +6,7 @@
 //! `if` that is taken is lowered, so `if k == 0 { .. } else { q[2*k-2] }`
 //! never sees the out-of-range index of the other branch.
 
-use crate::parse::{BinOp, CmpOp, Cond, ConstraintDecl, Dof, Expr, ExprKind, SystemDef};
+use crate::parse::{BinOp, CmpOp, Cond, ConstraintDecl, Dof, Expr, ExprKind, Link, SystemDef};
 use crate::simplify::MAX_EXPONENT;
 use crate::symbolic::{Func, Graph, Names, NodeId, ParamId, VarId};
 use proc_macro2::Span;
@@ -133,13 +133,6 @@ impl Lowerer {
 
     /// Evaluates an index expression (integers, `const`s, bound indices).
     fn int(&self, e: &Expr) -> Result<i64, Error> {
-        let not_int = || {
-            Error::new(
-                e.span,
-                "expected a compile-time integer: index expressions may use integer literals, \
-                 `const`s, family and sum indices, `+ - * / %` and parentheses",
-            )
-        };
         let overflow = || Error::new(e.span, "integer overflow in an index expression");
         Ok(match &e.kind {
             ExprKind::Num(v, _) if v.fract() == 0.0 && v.abs() < 9e15 => *v as i64,
@@ -150,7 +143,7 @@ impl Lowerer {
                 } else {
                     match self.syms.get(&name) {
                         Some((Sym::Number(v), _)) if v.fract() == 0.0 => *v as i64,
-                        Some(_) => return Err(not_int()),
+                        Some(_) => return Err(not_int(e.span)),
                         None => {
                             return Err(Error::new(
                                 id.span(),
@@ -164,26 +157,13 @@ impl Lowerer {
                 }
             }
             ExprKind::Neg(a) => self.int(a)?.checked_neg().ok_or_else(overflow)?,
-            ExprKind::Binary(op, a, b) => {
-                let (a, b) = (self.int(a)?, self.int(b)?);
-                let r = match op {
-                    BinOp::Add => a.checked_add(b),
-                    BinOp::Sub => a.checked_sub(b),
-                    BinOp::Mul => a.checked_mul(b),
-                    BinOp::Div | BinOp::Rem if b == 0 => {
-                        return Err(Error::new(
-                            e.span,
-                            "division by zero in an index expression",
-                        ))
-                    }
-                    BinOp::Div => a.checked_div(b),
-                    BinOp::Rem => a.checked_rem(b),
-                    BinOp::Pow => match u32::try_from(b) {
-                        Ok(b) => a.checked_pow(b),
-                        Err(_) => return Err(not_int()),
-                    },
-                };
-                r.ok_or_else(overflow)?
+            ExprKind::Binary(op, a, b) => self.int_op(*op, self.int(a)?, self.int(b)?, e.span)?,
+            ExprKind::Chain(first, links) => {
+                let mut acc = self.int(first)?;
+                for l in links {
+                    acc = self.int_op(l.op, acc, self.int(&l.rhs)?, l.span)?;
+                }
+                acc
             }
             ExprKind::If(c, t, f) => {
                 if self.cond(c)? {
@@ -192,8 +172,27 @@ impl Lowerer {
                     self.int(f)?
                 }
             }
-            _ => return Err(not_int()),
+            _ => return Err(not_int(e.span)),
         })
+    }
+
+    /// `a op b` in an index expression; errors at `at`, the operator.
+    fn int_op(&self, op: BinOp, a: i64, b: i64, at: Span) -> Result<i64, Error> {
+        let r = match op {
+            BinOp::Add => a.checked_add(b),
+            BinOp::Sub => a.checked_sub(b),
+            BinOp::Mul => a.checked_mul(b),
+            BinOp::Div | BinOp::Rem if b == 0 => {
+                return Err(Error::new(at, "division by zero in an index expression"))
+            }
+            BinOp::Div => a.checked_div(b),
+            BinOp::Rem => a.checked_rem(b),
+            BinOp::Pow => match u32::try_from(b) {
+                Ok(b) => a.checked_pow(b),
+                Err(_) => return Err(not_int(at)),
+            },
+        };
+        r.ok_or_else(|| Error::new(at, "integer overflow in an index expression"))
     }
 
     fn cond(&self, c: &Cond) -> Result<bool, Error> {
@@ -209,8 +208,22 @@ impl Lowerer {
                     CmpOp::Ge => a >= b,
                 }
             }
-            Cond::And(a, b) => self.cond(a)? && self.cond(b)?,
-            Cond::Or(a, b) => self.cond(a)? || self.cond(b)?,
+            Cond::And(all) => {
+                for c in all {
+                    if !self.cond(c)? {
+                        return Ok(false);
+                    }
+                }
+                true
+            }
+            Cond::Or(any) => {
+                for c in any {
+                    if self.cond(c)? {
+                        return Ok(true);
+                    }
+                }
+                false
+            }
         })
     }
 
@@ -226,8 +239,8 @@ impl Lowerer {
     }
 
     /// Refuses a power x^n with |n| > [`MAX_EXPONENT`], written or made by
-    /// merging (`x^a · x^b`), at the operator that made it.
-    fn exponent_ok(&self, node: NodeId, e: &Expr) -> Result<NodeId, Error> {
+    /// merging (`x^a · x^b`), at the operator `at` that made it.
+    fn exponent_ok(&self, node: NodeId, at: Span) -> Result<NodeId, Error> {
         let n = self.graph.max_exponent(node);
         if n > MAX_EXPONENT {
             let shown = if n == u32::MAX {
@@ -236,7 +249,7 @@ impl Lowerer {
                 n.to_string()
             };
             return Err(Error::new(
-                e.span,
+                at,
                 format!(
                     "exponent too large: this makes a power with |exponent| {shown}, above the limit of \
                      {MAX_EXPONENT} (x^n over- or underflows f64 for every |x| outside [0.5, 2] there)"
@@ -247,216 +260,238 @@ impl Lowerer {
     }
 
     /// Lowers a real-valued expression into the graph.
+    ///
+    /// Each form is lowered by a function of its own: the recursion runs
+    /// through this dispatch and the forms that nest, and without
+    /// optimisation a function's frame holds the locals of all its arms.
     fn real(&mut self, e: &Expr) -> Result<NodeId, Error> {
-        Ok(match &e.kind {
-            ExprKind::Num(v, _) => self.graph.num(*v),
-            ExprKind::Ident(id) => {
-                let name = id.to_string();
-                if let Some(v) = self.lookup_index(&name) {
-                    return Ok(self.graph.num(v as f64));
-                }
-                match self.syms.get(&name).map(|s| s.0.clone()) {
-                    Some(Sym::Number(v)) => self.graph.num(v),
-                    Some(Sym::Param(p)) => self.graph.param(p),
-                    Some(Sym::Var(v)) => self.graph.var(v),
-                    Some(Sym::Let(n)) => n,
-                    Some(Sym::Array(_)) => {
-                        return Err(Error::new(
-                            id.span(),
-                            format!(
-                                "`{name}` is an array of the state: index it, as in `{name}[0]`"
-                            ),
-                        ))
-                    }
-                    None => {
-                        return Err(Error::new(
-                            id.span(),
-                            format!(
-                                "unknown symbol `{name}`: not a parameter, coordinate, momentum, \
-                                 `let`, `const` or bound index{}",
-                                self.did_you_mean(&name, |s| !matches!(s, Sym::Array(_)))
-                            ),
-                        ))
-                    }
-                }
-            }
-            ExprKind::Index(id, idx, bracket) => {
-                let name = id.to_string();
-                let offset = match self.syms.get(&name).map(|s| s.0.clone()) {
-                    Some(Sym::Array(o)) => o,
-                    Some(_) => {
-                        return Err(Error::new(id.span(), format!("`{name}` is not an array: it cannot be indexed")))
-                    }
-                    None => {
-                        return Err(Error::new(
-                            id.span(),
-                            format!(
-                                "unknown array `{name}`: the state arrays are the ones declared by `dof`{}",
-                                self.did_you_mean(&name, |s| matches!(s, Sym::Array(_)))
-                            ),
-                        ))
-                    }
-                };
-                let i = self.int(idx)?;
-                if i < 0 || i as usize >= self.dof {
-                    return Err(Error::new(
-                        *bracket,
-                        format!(
-                            "index out of range: `{name}[{i}]`, but `{name}` has {} entries ({name}[0] to {name}[{}])",
-                            self.dof,
-                            self.dof - 1
-                        ),
-                    ));
-                }
-                self.graph.var(VarId((offset + i as usize) as u32))
-            }
+        match &e.kind {
+            ExprKind::Num(v, _) => Ok(self.graph.num(*v)),
+            ExprKind::Ident(id) => self.symbol(id),
+            ExprKind::Index(id, idx, bracket) => self.state(id, idx, *bracket),
             ExprKind::Neg(a) => {
                 let a = self.real(a)?;
-                self.graph.neg(a)
+                Ok(self.graph.neg(a))
             }
             ExprKind::Binary(op, a, b) => {
                 let x = self.real(a)?;
                 let y = self.real(b)?;
-                let r = match op {
-                    BinOp::Add => self.graph.add2(x, y),
-                    BinOp::Sub => self.graph.sub(x, y),
-                    BinOp::Mul => self.graph.mul2(x, y),
-                    BinOp::Div => {
-                        if self.graph.is_zero(y) {
-                            return Err(Error::new(b.span, "division by zero"));
-                        }
-                        self.graph.div(x, y)
-                    }
-                    BinOp::Rem => {
-                        return Err(Error::new(
-                            e.span,
-                            "`%` is only allowed in index expressions: it is not differentiable",
-                        ))
-                    }
-                    BinOp::Pow => match self.graph.as_const(y) {
-                        Some(r) if r.is_finite() => {
-                            if self.graph.is_zero(x) && r < 0.0 {
-                                return Err(Error::new(
-                                    e.span,
-                                    "division by zero: 0 to a negative power",
-                                ));
-                            }
-                            self.graph.powf(x, r)
-                        }
-                        _ => return Err(Error::new(
-                            b.span,
-                            "the exponent must be a constant (a number, a `const` or an index); \
-                                 write `exp(y * ln(x))` for a variable exponent",
-                        )),
-                    },
-                };
-                self.exponent_ok(r, e)?
+                self.binary(*op, x, y, e.span, b)
             }
-            ExprKind::Call(f, args) => {
-                let name = f.to_string();
-                let func = match name.as_str() {
-                    "sqrt" => None,
-                    "sin" => Some(Func::Sin),
-                    "cos" => Some(Func::Cos),
-                    "tan" => Some(Func::Tan),
-                    "exp" => Some(Func::Exp),
-                    "ln" => Some(Func::Ln),
-                    _ if NON_DIFFERENTIABLE.contains(&name.as_str()) => {
-                        return Err(Error::new(
-                            f.span(),
-                            format!(
-                                "`{name}` is not differentiable: the methods need derivatives of H and g \
-                                 (the supported functions are {FUNCS})"
-                            ),
-                        ))
-                    }
-                    "log" => {
-                        return Err(Error::new(f.span(), "`log` is ambiguous: write `ln` for the natural logarithm"))
-                    }
-                    "sinh" | "cosh" | "tanh" => {
-                        return Err(Error::new(
-                            f.span(),
-                            format!(
-                                "unknown function `{name}`: write the hyperbolic functions with `exp` \
-                                 (sinh(x) = (exp(x) - exp(-x)) / 2, cosh(x) = (exp(x) + exp(-x)) / 2, \
-                                 tanh(x) = sinh(x) / cosh(x)); the supported functions are {FUNCS}"
-                            ),
-                        ))
-                    }
-                    _ => {
-                        return Err(Error::new(
-                            f.span(),
-                            format!(
-                                "unknown function `{name}`: the supported functions are {FUNCS}{}",
-                                suggestion(&name, FUNCS.split(", "))
-                            ),
-                        ))
-                    }
-                };
-                if args.len() != 1 {
-                    return Err(Error::new(
-                        f.span(),
-                        format!("`{name}` takes one argument, {} given", args.len()),
-                    ));
-                }
-                let x = self.real(&args[0])?;
-                let y = match func {
-                    None => self.graph.sqrt(x),
-                    Some(func) => self.graph.call(func, x),
-                };
-                // A function of a constant outside its domain (sqrt(-1),
-                // ln(0)) folds to NaN or ∞: every H or g holding it would
-                // be NaN or ∞ at every state.
-                if self.graph.as_const(y).is_some_and(|v| !v.is_finite()) {
-                    return Err(Error::new(
-                        f.span(),
-                        format!(
-                            "`{name}` of the constant {} is not a finite real number",
-                            self.graph
-                                .as_const(x)
-                                .map_or("here".to_string(), |v| format!("{v}"))
-                        ),
-                    ));
-                }
-                y
-            }
-            ExprKind::Sum(var, lo, hi, body) => {
-                let range = self.range(lo, hi)?;
-                let len = range.end.saturating_sub(range.start).max(0) as u64;
-                self.terms = self.terms.saturating_add(len);
-                if self.terms > MAX_TERMS {
-                    return Err(Error::new(
-                        var.span(),
-                        format!(
-                            "the `sum`s of this declaration expand to more than {MAX_TERMS} terms in \
-                             all (nested sums multiply their lengths)"
-                        ),
-                    ));
-                }
-                let mut terms = Vec::new();
-                for i in range {
-                    self.bind_index(var, i)?;
-                    let t = self.real(body);
-                    self.indices.pop();
-                    terms.push(t?);
-                }
-                self.graph.add(terms)
-            }
-            ExprKind::Component(_, _, bracket) => {
-                return Err(Error::new(
-                    *bracket,
-                    "`x[a][c]` (coordinate c of particle a) is only for the templates of a \
-                     `particles x[D];` system; with `dof`, index the state directly: `q[i]`",
-                ))
-            }
+            ExprKind::Chain(first, links) => self.chain(first, links),
+            ExprKind::Call(f, args) => self.call(f, args),
+            ExprKind::Sum(var, lo, hi, body) => self.sum(var, lo, hi, body),
+            ExprKind::Component(_, _, bracket) => Err(Error::new(
+                *bracket,
+                "`x[a][c]` (coordinate c of particle a) is only for the templates of a \
+                 `particles x[D];` system; with `dof`, index the state directly: `q[i]`",
+            )),
             ExprKind::If(c, t, f) => {
                 if self.cond(c)? {
-                    self.real(t)?
+                    self.real(t)
                 } else {
-                    self.real(f)?
+                    self.real(f)
                 }
             }
+        }
+    }
+
+    /// A name alone: a bound index, a `const`, a parameter, a coordinate
+    /// or momentum, or a `let`.
+    fn symbol(&mut self, id: &Ident) -> Result<NodeId, Error> {
+        let name = id.to_string();
+        if let Some(v) = self.lookup_index(&name) {
+            return Ok(self.graph.num(v as f64));
+        }
+        Ok(match self.syms.get(&name).map(|s| s.0.clone()) {
+            Some(Sym::Number(v)) => self.graph.num(v),
+            Some(Sym::Param(p)) => self.graph.param(p),
+            Some(Sym::Var(v)) => self.graph.var(v),
+            Some(Sym::Let(n)) => n,
+            Some(Sym::Array(_)) => {
+                return Err(Error::new(
+                    id.span(),
+                    format!("`{name}` is an array of the state: index it, as in `{name}[0]`"),
+                ))
+            }
+            None => {
+                return Err(Error::new(
+                    id.span(),
+                    format!(
+                        "unknown symbol `{name}`: not a parameter, coordinate, momentum, \
+                         `let`, `const` or bound index{}",
+                        self.did_you_mean(&name, |s| !matches!(s, Sym::Array(_)))
+                    ),
+                ))
+            }
         })
+    }
+
+    /// `q[idx]`: an entry of a state array.
+    fn state(&mut self, id: &Ident, idx: &Expr, bracket: Span) -> Result<NodeId, Error> {
+        let name = id.to_string();
+        let offset = match self.syms.get(&name).map(|s| s.0.clone()) {
+            Some(Sym::Array(o)) => o,
+            Some(_) => {
+                return Err(Error::new(
+                    id.span(),
+                    format!("`{name}` is not an array: it cannot be indexed"),
+                ))
+            }
+            None => {
+                return Err(Error::new(
+                    id.span(),
+                    format!(
+                        "unknown array `{name}`: the state arrays are the ones declared by `dof`{}",
+                        self.did_you_mean(&name, |s| matches!(s, Sym::Array(_)))
+                    ),
+                ))
+            }
+        };
+        let i = self.int(idx)?;
+        if i < 0 || i as usize >= self.dof {
+            return Err(Error::new(
+                bracket,
+                format!(
+                    "index out of range: `{name}[{i}]`, but `{name}` has {} entries ({name}[0] to {name}[{}])",
+                    self.dof,
+                    self.dof - 1
+                ),
+            ));
+        }
+        Ok(self.graph.var(VarId((offset + i as usize) as u32)))
+    }
+
+    /// `x op y` for the lowered operands, the operator at `at` and the
+    /// right operand written `rhs` (where a division by zero is reported).
+    fn binary(
+        &mut self,
+        op: BinOp,
+        x: NodeId,
+        y: NodeId,
+        at: Span,
+        rhs: &Expr,
+    ) -> Result<NodeId, Error> {
+        let r = match op {
+            BinOp::Add => self.graph.add2(x, y),
+            BinOp::Sub => self.graph.sub(x, y),
+            BinOp::Mul => self.graph.mul2(x, y),
+            BinOp::Div => {
+                if self.graph.is_zero(y) {
+                    return Err(Error::new(rhs.span, "division by zero"));
+                }
+                self.graph.div(x, y)
+            }
+            BinOp::Rem => {
+                return Err(Error::new(
+                    at,
+                    "`%` is only allowed in index expressions: it is not differentiable",
+                ))
+            }
+            BinOp::Pow => match self.graph.as_const(y) {
+                Some(r) if r.is_finite() => {
+                    if self.graph.is_zero(x) && r < 0.0 {
+                        return Err(Error::new(at, "division by zero: 0 to a negative power"));
+                    }
+                    self.graph.powf(x, r)
+                }
+                _ => {
+                    return Err(Error::new(
+                        rhs.span,
+                        "the exponent must be a constant (a number, a `const` or an index); \
+                         write `exp(y * ln(x))` for a variable exponent",
+                    ))
+                }
+            },
+        };
+        self.exponent_ok(r, at)
+    }
+
+    /// A chain `a + b - c` or `a * b / c`. A sum is one n-ary sum of its
+    /// terms, so like terms are collected along the whole chain, however
+    /// long (summed two at a time, a sum stops being flattened into the
+    /// next past `FLATTEN_LIMIT` terms). A product is folded left to right,
+    /// two factors at a time, each step checked at its operator (a division
+    /// by zero, an exponent grown past the limit by merging).
+    fn chain(&mut self, first: &Expr, links: &[Link]) -> Result<NodeId, Error> {
+        let x = self.real(first)?;
+        if links
+            .iter()
+            .all(|l| matches!(l.op, BinOp::Add | BinOp::Sub))
+        {
+            let mut terms = Vec::with_capacity(links.len() + 1);
+            terms.push(x);
+            for l in links {
+                let y = self.real(&l.rhs)?;
+                terms.push(match l.op {
+                    BinOp::Sub => self.graph.neg(y),
+                    _ => y,
+                });
+            }
+            return Ok(self.graph.add(terms));
+        }
+        let mut acc = x;
+        for l in links {
+            let y = self.real(&l.rhs)?;
+            acc = self.binary(l.op, acc, y, l.span, &l.rhs)?;
+        }
+        Ok(acc)
+    }
+
+    /// `f(args)`: sqrt and the elementary functions.
+    fn call(&mut self, f: &Ident, args: &[Expr]) -> Result<NodeId, Error> {
+        let name = f.to_string();
+        let func = function(f, &name)?;
+        if args.len() != 1 {
+            return Err(Error::new(
+                f.span(),
+                format!("`{name}` takes one argument, {} given", args.len()),
+            ));
+        }
+        let x = self.real(&args[0])?;
+        let y = match func {
+            None => self.graph.sqrt(x),
+            Some(func) => self.graph.call(func, x),
+        };
+        // A function of a constant outside its domain (sqrt(-1),
+        // ln(0)) folds to NaN or ∞: every H or g holding it would
+        // be NaN or ∞ at every state.
+        if self.graph.as_const(y).is_some_and(|v| !v.is_finite()) {
+            return Err(Error::new(
+                f.span(),
+                format!(
+                    "`{name}` of the constant {} is not a finite real number",
+                    self.graph
+                        .as_const(x)
+                        .map_or("here".to_string(), |v| format!("{v}"))
+                ),
+            ));
+        }
+        Ok(y)
+    }
+
+    /// `sum var in lo..hi { body }`, expanded.
+    fn sum(&mut self, var: &Ident, lo: &Expr, hi: &Expr, body: &Expr) -> Result<NodeId, Error> {
+        let range = self.range(lo, hi)?;
+        let len = range.end.saturating_sub(range.start).max(0) as u64;
+        self.terms = self.terms.saturating_add(len);
+        if self.terms > MAX_TERMS {
+            return Err(Error::new(
+                var.span(),
+                format!(
+                    "the `sum`s of this declaration expand to more than {MAX_TERMS} terms in \
+                     all (nested sums multiply their lengths)"
+                ),
+            ));
+        }
+        let mut terms = Vec::new();
+        for i in range {
+            self.bind_index(var, i)?;
+            let t = self.real(body);
+            self.indices.pop();
+            terms.push(t?);
+        }
+        Ok(self.graph.add(terms))
     }
 
     fn constraint(
@@ -495,6 +530,62 @@ impl Lowerer {
         }
         Ok(())
     }
+}
+
+/// The function `f` (named `name`) stands for: `None` for `sqrt` (a
+/// power), else the elementary function; an error naming the supported
+/// functions otherwise.
+fn function(f: &Ident, name: &str) -> Result<Option<Func>, Error> {
+    Ok(match name {
+        "sqrt" => None,
+        "sin" => Some(Func::Sin),
+        "cos" => Some(Func::Cos),
+        "tan" => Some(Func::Tan),
+        "exp" => Some(Func::Exp),
+        "ln" => Some(Func::Ln),
+        _ if NON_DIFFERENTIABLE.contains(&name) => {
+            return Err(Error::new(
+                f.span(),
+                format!(
+                    "`{name}` is not differentiable: the methods need derivatives of H and g \
+                     (the supported functions are {FUNCS})"
+                ),
+            ))
+        }
+        "log" => {
+            return Err(Error::new(
+                f.span(),
+                "`log` is ambiguous: write `ln` for the natural logarithm",
+            ))
+        }
+        "sinh" | "cosh" | "tanh" => {
+            return Err(Error::new(
+                f.span(),
+                format!(
+                    "unknown function `{name}`: write the hyperbolic functions with `exp` \
+                     (sinh(x) = (exp(x) - exp(-x)) / 2, cosh(x) = (exp(x) + exp(-x)) / 2, \
+                     tanh(x) = sinh(x) / cosh(x)); the supported functions are {FUNCS}"
+                ),
+            ))
+        }
+        _ => {
+            return Err(Error::new(
+                f.span(),
+                format!(
+                    "unknown function `{name}`: the supported functions are {FUNCS}{}",
+                    suggestion(name, FUNCS.split(", "))
+                ),
+            ))
+        }
+    })
+}
+
+fn not_int(at: Span) -> Error {
+    Error::new(
+        at,
+        "expected a compile-time integer: index expressions may use integer literals, \
+         `const`s, family and sum indices, `+ - * / %` and parentheses",
+    )
 }
 
 /// The edit distance between two names, in characters: insertions,
@@ -550,7 +641,9 @@ fn suggestion<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Stri
 /// The deepest expression graph a `let` may make (the longest chain of
 /// operations from it down to q, p or a parameter). Only `let`s that build
 /// on each other reach it: an expression alone is at most
-/// [`crate::parse::MAX_NESTING`] deep. Every pass is linear in the graph,
+/// [`crate::parse::MAX_NESTING`] deep, plus a level for every
+/// [`crate::simplify::FLATTEN_LIMIT`] factors of a long product (a sum is
+/// one node however long). Every pass is linear in the graph,
 /// but the generated code grows with the depth times the number of
 /// derivatives; 2000 nested `let`s already take seconds to expand.
 pub const MAX_LET_DEPTH: u32 = 1000;

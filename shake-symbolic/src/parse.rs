@@ -4,7 +4,7 @@
 //! The grammar is stated in the doc comment of `constrained_system!`
 //! (`lib.rs`); this module follows it item by item.
 
-use proc_macro2::Span;
+use proc_macro2::{Span, TokenStream, TokenTree};
 use syn::parse::{Parse, ParseStream};
 use syn::{
     braced, bracketed, parenthesized, token, Attribute, Ident, LitFloat, LitInt, Token, Visibility,
@@ -71,10 +71,13 @@ pub enum CmpOp {
 }
 
 /// A compile-time condition on indices, in `if cond { .. } else { .. }`.
+/// `&&` and `||` chains are flat lists, so a long chain is not a deep tree.
 pub enum Cond {
     Cmp(CmpOp, Box<Expr>, Box<Expr>),
-    And(Box<Cond>, Box<Cond>),
-    Or(Box<Cond>, Box<Cond>),
+    /// `a && b && ..`: at least two comparisons.
+    And(Vec<Cond>),
+    /// `a || b || ..`: at least two operands, each a comparison or an `And`.
+    Or(Vec<Cond>),
 }
 
 /// An expression; `span` is the span of its first token (or of its operator).
@@ -93,11 +96,27 @@ pub enum ExprKind {
     /// `particles` system (see `topology`); the span is the second bracket's.
     Component(Box<Expr>, Box<Expr>, Span),
     Neg(Box<Expr>),
+    /// `a ^ b`. `^` is right-associative, so `a^b^c` nests, one level of
+    /// [`MAX_NESTING`] per `^`.
     Binary(BinOp, Box<Expr>, Box<Expr>),
+    /// `a + b - c` or `a * b / c % d`: the left-associative operators of one
+    /// precedence, applied left to right to the first operand and each
+    /// link's. The tree `((a + b) - c)` they stand for would be as deep as
+    /// the sum is long, and so would every recursive pass over it (a sum of
+    /// 10⁵ terms overflows the stack); a flat list is one level. The span of
+    /// the chain is its last operator's, the root of that tree.
+    Chain(Box<Expr>, Vec<Link>),
     Call(Ident, Vec<Expr>),
     /// `sum i in lo..hi { body }`
     Sum(Ident, Box<Expr>, Box<Expr>, Box<Expr>),
     If(Cond, Box<Expr>, Box<Expr>),
+}
+
+/// One step of a [`ExprKind::Chain`]: `op rhs`, the operator at `span`.
+pub struct Link {
+    pub op: BinOp,
+    pub span: Span,
+    pub rhs: Expr,
 }
 
 /// `name, ..` or `name = default, ..`: the parameters and, when every one
@@ -381,30 +400,88 @@ const PREC_SUM: u8 = 1;
 const PREC_PRODUCT: u8 = 2;
 const PREC_POWER: u8 = 3;
 
-fn peek_binop(input: ParseStream) -> Option<(BinOp, u8)> {
+fn peek_binop(input: ParseStream) -> Option<BinOp> {
     if input.peek(Token![+]) {
-        Some((BinOp::Add, PREC_SUM))
+        Some(BinOp::Add)
     } else if input.peek(Token![-]) {
-        Some((BinOp::Sub, PREC_SUM))
+        Some(BinOp::Sub)
     } else if input.peek(Token![*]) {
-        Some((BinOp::Mul, PREC_PRODUCT))
+        Some(BinOp::Mul)
     } else if input.peek(Token![/]) {
-        Some((BinOp::Div, PREC_PRODUCT))
+        Some(BinOp::Div)
     } else if input.peek(Token![%]) {
-        Some((BinOp::Rem, PREC_PRODUCT))
+        Some(BinOp::Rem)
     } else if input.peek(Token![^]) {
-        Some((BinOp::Pow, PREC_POWER))
+        Some(BinOp::Pow)
     } else {
         None
     }
 }
 
+fn precedence(op: BinOp) -> u8 {
+    match op {
+        BinOp::Add | BinOp::Sub => PREC_SUM,
+        BinOp::Mul | BinOp::Div | BinOp::Rem => PREC_PRODUCT,
+        BinOp::Pow => PREC_POWER,
+    }
+}
+
 /// The deepest nesting of one expression the parser accepts: parentheses,
 /// unary minus signs, `^` chains (right-associative), calls, `sum` and `if`
-/// bodies each add a level. The parser is recursive, and so are the passes
-/// after it; the limit keeps them far from the stack's end (rustc runs the
-/// macro on an 8 MiB stack and dies, not errs, when it overflows).
+/// bodies each add a level (a level is one call of [`parse_expr`], so a
+/// bracket inside a sum of products can cost up to three). Chains of `+ -`
+/// and `* / %` add none, however long: they are flat ([`ExprKind::Chain`]).
+///
+/// The parser is recursive, and so are the lowering and the drop of the
+/// syntax tree after it; every pass on the expression graph after that is
+/// iterative or bounded (`diff` keeps an explicit stack, the tape is
+/// emitted in id order, renderings stop at `DISPLAY_DEPTH`). At this limit
+/// the deepest of these recursions (nested `if`s) takes at most about
+/// 0.4 MiB of stack in an optimised build, 1 MiB without optimisation:
+/// within the 2 MiB Rust gives a spawned thread (a test's) with room to
+/// spare (rustc runs the macro, and Python its main thread, on 8 MiB).
 pub const MAX_NESTING: usize = 256;
+
+/// The deepest nesting of brackets `()`, `[]` and `{}` in a declaration:
+/// an expression's own (each bracket in an expression opens at least one
+/// level of [`MAX_NESTING`]) inside at most three of the declaration's
+/// (the struct's braces, `constraints { }`, a family's `[ ]`). Anything
+/// deeper is refused by [`check_bracket_depth`].
+pub const MAX_BRACKET_DEPTH: usize = MAX_NESTING + 3;
+
+/// Refuses tokens whose brackets nest deeper than [`MAX_BRACKET_DEPTH`], at
+/// the first bracket past it. Run on a declaration read from a string
+/// before `syn` sees it: `syn` copies the tokens into its buffer with one
+/// recursive call per bracket level, which overflows an 8 MiB stack at
+/// some 40 000 levels, before the parser's [`MAX_NESTING`] can refuse
+/// anything. This walk keeps its own stack.
+pub fn check_bracket_depth(tokens: &TokenStream) -> syn::Result<()> {
+    let mut open = vec![tokens.clone().into_iter()];
+    while let Some(level) = open.last_mut() {
+        match level.next() {
+            Some(TokenTree::Group(g)) => {
+                // `g` is at depth `open.len()` (a top-level group is at 1).
+                if open.len() > MAX_BRACKET_DEPTH {
+                    return Err(syn::Error::new(
+                        g.span_open(),
+                        format!(
+                            "expression nested too deeply: brackets `()`, `[]`, `{{}}` nest more \
+                             than {MAX_BRACKET_DEPTH} deep here, and an expression may nest at \
+                             most {MAX_NESTING} levels of parentheses, unary minus signs, `^` or \
+                             calls (split it with `let`s)"
+                        ),
+                    ));
+                }
+                open.push(g.stream().into_iter());
+            }
+            Some(_) => {}
+            None => {
+                open.pop();
+            }
+        }
+    }
+    Ok(())
+}
 
 thread_local! {
     /// The current nesting of [`parse_expr`] calls on this thread.
@@ -438,64 +515,175 @@ impl Drop for Nested {
 }
 
 /// Precedence climbing: `+ -` < `* / %` < unary `-` < `^` (right-assoc).
+/// Operators of one precedence in a row make one [`ExprKind::Chain`].
 pub fn parse_expr(input: ParseStream, min_prec: u8) -> syn::Result<Expr> {
     let _nested = Nested::enter(input)?;
     let mut lhs = parse_unary(input)?;
-    while let Some((op, prec)) = peek_binop(input) {
+    // Links applied to `lhs`, not yet folded into it.
+    let mut links: Vec<Link> = Vec::new();
+    while let Some(op) = peek_binop(input) {
+        let prec = precedence(op);
         if prec < min_prec {
             break;
         }
-        let span = input.span();
-        let tt: proc_macro2::TokenTree = input.parse()?;
-        if let proc_macro2::TokenTree::Punct(star) = &tt {
-            // `x ** 2` lexes as `*` joined to `*`.
-            if op == BinOp::Mul
-                && star.spacing() == proc_macro2::Spacing::Joint
-                && input.peek(Token![*])
-            {
-                return Err(syn::Error::new(
-                    span,
-                    "`**` is not an operator of the grammar: write `^` for a power, as in `x^2`",
-                ));
-            }
-        }
-        let rhs = if op == BinOp::Pow {
-            parse_expr(input, PREC_POWER)?
-        } else {
-            parse_expr(input, prec + 1)?
-        };
-        lhs = Expr {
-            kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
-            span,
-        };
+        let span = parse_operator(input, op)?;
+        let rhs = parse_expr(input, if op == BinOp::Pow { prec } else { prec + 1 })?;
+        apply(&mut lhs, &mut links, Link { op, span, rhs });
     }
+    fold(&mut lhs, &mut links);
     Ok(lhs)
 }
 
+// `apply` and `fold` build the tree in place, outside `parse_expr`: the
+// temporaries they need stay off the stack of the recursion.
+
+/// Applies `link` to `lhs` followed by `links`: a `^` at once, the others
+/// appended to `links`, after folding them into `lhs` if their precedence
+/// differs.
+fn apply(lhs: &mut Expr, links: &mut Vec<Link>, link: Link) {
+    let prec = precedence(link.op);
+    if link.op == BinOp::Pow || links.last().is_some_and(|l| precedence(l.op) != prec) {
+        fold(lhs, links);
+    }
+    if link.op == BinOp::Pow {
+        let base = take(lhs);
+        *lhs = Expr {
+            kind: ExprKind::Binary(link.op, Box::new(base), Box::new(link.rhs)),
+            span: link.span,
+        };
+    } else {
+        links.push(link);
+    }
+}
+
+/// Makes `lhs` the chain of `lhs` and `links`, and empties `links`.
+fn fold(lhs: &mut Expr, links: &mut Vec<Link>) {
+    if let Some(last) = links.last() {
+        let span = last.span;
+        let first = take(lhs);
+        *lhs = Expr {
+            span,
+            kind: ExprKind::Chain(Box::new(first), std::mem::take(links)),
+        };
+    }
+}
+
+/// Moves `e` out, leaving a placeholder.
+fn take(e: &mut Expr) -> Expr {
+    let placeholder = Expr {
+        kind: ExprKind::Num(0.0, true),
+        span: e.span,
+    };
+    std::mem::replace(e, placeholder)
+}
+
+/// Reads the operator `op` that [`peek_binop`] saw; its span.
+fn parse_operator(input: ParseStream, op: BinOp) -> syn::Result<Span> {
+    let span = input.span();
+    let tt: TokenTree = input.parse()?;
+    if let TokenTree::Punct(star) = &tt {
+        // `x ** 2` lexes as `*` joined to `*`.
+        if op == BinOp::Mul
+            && star.spacing() == proc_macro2::Spacing::Joint
+            && input.peek(Token![*])
+        {
+            return Err(syn::Error::new(
+                span,
+                "`**` is not an operator of the grammar: write `^` for a power, as in `x^2`",
+            ));
+        }
+    }
+    Ok(span)
+}
+
+// `parse_unary` and `parse_primary` only dispatch: each form has its own
+// function, so the recursion through one form does not carry the stack
+// frames of the others (without optimisation every local of a function has
+// its own slot).
 fn parse_unary(input: ParseStream) -> syn::Result<Expr> {
     if input.peek(Token![-]) {
-        let span = input.span();
-        input.parse::<Token![-]>()?;
-        let e = parse_expr(input, PREC_POWER)?;
-        return Ok(Expr {
-            kind: ExprKind::Neg(Box::new(e)),
-            span,
-        });
+        parse_neg(input)
+    } else {
+        parse_primary(input)
     }
-    parse_primary(input)
+}
+
+/// `- expr`: the operand binds tighter than `* /`, looser than `^`.
+fn parse_neg(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
+    input.parse::<Token![-]>()?;
+    let e = parse_expr(input, PREC_POWER)?;
+    Ok(Expr {
+        kind: ExprKind::Neg(Box::new(e)),
+        span,
+    })
 }
 
 fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
-    let span = input.span();
     if input.peek(token::Paren) {
-        let c;
-        parenthesized!(c in input);
-        let e = parse_expr(&c, 0)?;
-        if !c.is_empty() {
-            return Err(c.error("expected `)`"));
-        }
-        return Ok(e);
+        parse_parenthesized(input)
+    } else if input.peek(LitInt) || input.peek(LitFloat) {
+        parse_number(input)
+    } else if input.peek(Token![if]) {
+        parse_if(input)
+    } else if kw(input, "sum") && input.peek2(syn::Ident) && input.peek3(Token![in]) {
+        parse_sum(input)
+    } else if input.peek(syn::Ident) && input.peek2(token::Bracket) {
+        parse_index(input)
+    } else if input.peek(syn::Ident) && input.peek2(token::Paren) {
+        parse_call(input)
+    } else if input.peek(syn::Ident) {
+        parse_ident(input)
+    } else {
+        Err(input.error("expected an expression: a number, a name, `q[i]`, `f(x)`, `(..)`, `sum i in a..b { .. }` or `if .. { .. } else { .. }`"))
     }
+}
+
+/// A name alone.
+fn parse_ident(input: ParseStream) -> syn::Result<Expr> {
+    let id: Ident = input.parse()?;
+    Ok(Expr {
+        span: id.span(),
+        kind: ExprKind::Ident(id),
+    })
+}
+
+/// `( expr )`.
+fn parse_parenthesized(input: ParseStream) -> syn::Result<Expr> {
+    let c;
+    parenthesized!(c in input);
+    let e = parse_expr(&c, 0)?;
+    if !c.is_empty() {
+        return Err(c.error("expected `)`"));
+    }
+    Ok(e)
+}
+
+/// `{ expr }`: the body of a `sum` or a branch of an `if`.
+fn parse_braced(input: ParseStream) -> syn::Result<Expr> {
+    let c;
+    braced!(c in input);
+    let e = parse_expr(&c, 0)?;
+    if !c.is_empty() {
+        return Err(c.error("expected `}`"));
+    }
+    Ok(e)
+}
+
+/// `[ expr ]`, and the span of the brackets.
+fn parse_bracketed(input: ParseStream) -> syn::Result<(Expr, Span)> {
+    let c;
+    let b = bracketed!(c in input);
+    let e = parse_expr(&c, 0)?;
+    if !c.is_empty() {
+        return Err(c.error("expected `]`"));
+    }
+    Ok((e, b.span.join()))
+}
+
+/// An integer or float literal.
+fn parse_number(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
     if input.peek(LitInt) {
         let l: LitInt = input.parse()?;
         let v: i64 = l.base10_parse()?;
@@ -504,131 +692,128 @@ fn parse_primary(input: ParseStream) -> syn::Result<Expr> {
             span,
         });
     }
-    if input.peek(LitFloat) {
-        let l: LitFloat = input.parse()?;
-        let v: f64 = l.base10_parse()?;
-        return Ok(Expr {
-            kind: ExprKind::Num(v, false),
-            span,
-        });
-    }
-    if input.peek(Token![if]) {
-        input.parse::<Token![if]>()?;
-        let cond = parse_cond(input)?;
-        let c;
-        braced!(c in input);
-        let then = parse_expr(&c, 0)?;
-        if !c.is_empty() {
-            return Err(c.error("expected `}`"));
-        }
-        input.parse::<Token![else]>()?;
-        let otherwise = if input.peek(Token![if]) {
-            // `else if` chains recurse here, not through `parse_expr`.
-            let _nested = Nested::enter(input)?;
-            parse_primary(input)?
-        } else {
-            let c;
-            braced!(c in input);
-            let e = parse_expr(&c, 0)?;
-            if !c.is_empty() {
-                return Err(c.error("expected `}`"));
-            }
-            e
-        };
-        return Ok(Expr {
-            kind: ExprKind::If(cond, Box::new(then), Box::new(otherwise)),
-            span,
-        });
-    }
-    if input.peek(syn::Ident) {
-        let id: Ident = input.parse()?;
-        if id == "sum" && input.peek(syn::Ident) && input.peek2(Token![in]) {
-            let var: Ident = input.parse()?;
-            input.parse::<Token![in]>()?;
-            let lo = parse_expr(input, 0)?;
-            input.parse::<Token![..]>()?;
-            let hi = parse_expr(input, 0)?;
-            let c;
-            braced!(c in input);
-            let body = parse_expr(&c, 0)?;
-            if !c.is_empty() {
-                return Err(c.error("expected `}`"));
-            }
-            return Ok(Expr {
-                kind: ExprKind::Sum(var, Box::new(lo), Box::new(hi), Box::new(body)),
-                span,
-            });
-        }
-        if input.peek(token::Bracket) {
-            let c;
-            let b = bracketed!(c in input);
-            let idx = parse_expr(&c, 0)?;
-            if !c.is_empty() {
-                return Err(c.error("expected `]`"));
-            }
-            let mut e = Expr {
-                kind: ExprKind::Index(id, Box::new(idx), b.span.join()),
-                span,
-            };
-            // `x[a][c]`: a coordinate of a particle (topology templates).
-            if input.peek(token::Bracket) {
-                let c;
-                let b = bracketed!(c in input);
-                let comp = parse_expr(&c, 0)?;
-                if !c.is_empty() {
-                    return Err(c.error("expected `]`"));
-                }
-                e = Expr {
-                    kind: ExprKind::Component(Box::new(e), Box::new(comp), b.span.join()),
-                    span,
-                };
-            }
-            return Ok(e);
-        }
-        if input.peek(token::Paren) {
-            let c;
-            parenthesized!(c in input);
-            let mut args = Vec::new();
-            while !c.is_empty() {
-                args.push(parse_expr(&c, 0)?);
-                if c.is_empty() {
-                    break;
-                }
-                c.parse::<Token![,]>()?;
-            }
-            return Ok(Expr {
-                kind: ExprKind::Call(id, args),
-                span,
-            });
-        }
-        return Ok(Expr {
-            kind: ExprKind::Ident(id),
-            span,
-        });
-    }
-    Err(input.error("expected an expression: a number, a name, `q[i]`, `f(x)`, `(..)`, `sum i in a..b { .. }` or `if .. { .. } else { .. }`"))
+    let l: LitFloat = input.parse()?;
+    let v: f64 = l.base10_parse()?;
+    Ok(Expr {
+        kind: ExprKind::Num(v, false),
+        span,
+    })
 }
 
+/// `if cond { expr } else { expr }`, or `else if ..`.
+fn parse_if(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
+    input.parse::<Token![if]>()?;
+    let cond = parse_cond(input)?;
+    let then = Box::new(parse_braced(input)?);
+    let otherwise = Box::new(parse_else(input)?);
+    Ok(Expr {
+        kind: ExprKind::If(cond, then, otherwise),
+        span,
+    })
+}
+
+/// `else { expr }` or `else if ..`.
+fn parse_else(input: ParseStream) -> syn::Result<Expr> {
+    input.parse::<Token![else]>()?;
+    if input.peek(Token![if]) {
+        // `else if` chains recurse here, not through `parse_expr`.
+        let _nested = Nested::enter(input)?;
+        parse_if(input)
+    } else {
+        parse_braced(input)
+    }
+}
+
+/// `sum i in lo..hi { body }`.
+fn parse_sum(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
+    let (var, lo, hi) = parse_range(input)?;
+    let body = Box::new(parse_braced(input)?);
+    Ok(Expr {
+        kind: ExprKind::Sum(var, lo, hi, body),
+        span,
+    })
+}
+
+/// `sum i in lo..hi`: the index and the bounds.
+fn parse_range(input: ParseStream) -> syn::Result<(Ident, Box<Expr>, Box<Expr>)> {
+    input.parse::<Ident>()?;
+    let var: Ident = input.parse()?;
+    input.parse::<Token![in]>()?;
+    let lo = parse_expr(input, 0)?;
+    input.parse::<Token![..]>()?;
+    let hi = parse_expr(input, 0)?;
+    Ok((var, Box::new(lo), Box::new(hi)))
+}
+
+/// `q[i]`, or `x[a][c]`.
+fn parse_index(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
+    let id: Ident = input.parse()?;
+    let (idx, bracket) = parse_bracketed(input)?;
+    let mut e = Expr {
+        kind: ExprKind::Index(id, Box::new(idx), bracket),
+        span,
+    };
+    // `x[a][c]`: a coordinate of a particle (topology templates).
+    if input.peek(token::Bracket) {
+        let (comp, bracket) = parse_bracketed(input)?;
+        e = Expr {
+            kind: ExprKind::Component(Box::new(e), Box::new(comp), bracket),
+            span,
+        };
+    }
+    Ok(e)
+}
+
+/// `f(args)`.
+fn parse_call(input: ParseStream) -> syn::Result<Expr> {
+    let span = input.span();
+    let id: Ident = input.parse()?;
+    let c;
+    parenthesized!(c in input);
+    let mut args = Vec::new();
+    while !c.is_empty() {
+        args.push(parse_expr(&c, 0)?);
+        if c.is_empty() {
+            break;
+        }
+        c.parse::<Token![,]>()?;
+    }
+    Ok(Expr {
+        kind: ExprKind::Call(id, args),
+        span,
+    })
+}
+
+/// `a || b || ..` of [`parse_and`]s.
 fn parse_cond(input: ParseStream) -> syn::Result<Cond> {
-    let mut lhs = parse_and(input)?;
+    let mut any = vec![parse_and(input)?];
     while input.peek(Token![||]) {
         input.parse::<Token![||]>()?;
-        let rhs = parse_and(input)?;
-        lhs = Cond::Or(Box::new(lhs), Box::new(rhs));
+        any.push(parse_and(input)?);
     }
-    Ok(lhs)
+    Ok(if any.len() == 1 {
+        any.swap_remove(0)
+    } else {
+        Cond::Or(any)
+    })
 }
 
+/// `a && b && ..` of comparisons.
 fn parse_and(input: ParseStream) -> syn::Result<Cond> {
-    let mut lhs = parse_cmp(input)?;
+    let mut all = vec![parse_cmp(input)?];
     while input.peek(Token![&&]) {
         input.parse::<Token![&&]>()?;
-        let rhs = parse_cmp(input)?;
-        lhs = Cond::And(Box::new(lhs), Box::new(rhs));
+        all.push(parse_cmp(input)?);
     }
-    Ok(lhs)
+    Ok(if all.len() == 1 {
+        all.swap_remove(0)
+    } else {
+        Cond::And(all)
+    })
 }
-
 fn parse_cmp(input: ParseStream) -> syn::Result<Cond> {
     let a = parse_expr(input, 0)?;
     let op = if input.peek(Token![==]) {
