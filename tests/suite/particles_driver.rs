@@ -1,7 +1,7 @@
 //! A particle run on the engine's one driver: the same states as the
 //! particle step taken by hand (bit for bit), the driver's stride, observer,
 //! `on_step` and partial trajectory on failure, and the trajectory through
-//! CSV and back bit for bit (issue 29, item 6: 1000 rigid waters).
+//! CSV and back bit for bit (1000 rigid waters).
 
 use std::ops::ControlFlow;
 
