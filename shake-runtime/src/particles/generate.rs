@@ -144,8 +144,10 @@ fn thermal_momenta(rng: &mut SplitMix64, masses: &[f64]) -> Vec<f64> {
 /// simple cubic lattice at 33.37·10⁻³ molecules/Å³, random orientations;
 /// one constraint family `bond` of 3n distance constraints (O–H1, O–H2,
 /// H1–H2, the last at 2 R sin(θ/2), LAMMPS' `shake ... b 1 a 1`).
-/// Particles are O, H1, H2 per molecule. Momenta are thermal but not yet
-/// projected: use [`Rattle::project`](super::Rattle::project), then
+/// Particles are O, H1, H2 per molecule. Momenta are Maxwell–Boltzmann in
+/// shape only (v ~ N(0, 1/m) in Å/fs, as LAMMPS' `gen_data.py` draws them:
+/// about 10⁶ K, far too fast for a step of 2 fs) and not yet projected:
+/// use [`Rattle::project`](super::Rattle::project), then
 /// [`set_temperature`].
 ///
 /// ```
@@ -206,7 +208,8 @@ pub fn water(n: usize, seed: u64) -> Result<(ParticleSystem, ParticleState), Top
 
 /// A freely jointed chain of `links` + 1 beads (mass 14.027 g/mol), a random
 /// walk of bond 1.5 Å, every bond constrained (family `bond`, member k joins
-/// beads k and k + 1). Momenta thermal, not yet projected.
+/// beads k and k + 1). Momenta as for [`water`]: scale them with
+/// [`set_temperature`] after projecting.
 ///
 /// ```
 /// let (sys, _) = geoshake_runtime::particles::generate::chain(10, 3).unwrap();
