@@ -142,7 +142,9 @@ fn run(case: &Case, tol: f64) {
     timings.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (secs, wall) = timings[timings.len() / 2];
     let out = out.expect("at least one repeat");
-    let traj_bytes = out.trajectory.state_bytes() as f64 / out.trajectory.len().max(1) as f64;
+    // What one stored state takes in a `Trajectory` (q then p, nothing
+    // else: run_in_place itself stores none).
+    let traj_bytes = (2 * state.q().len() * std::mem::size_of::<f64>()) as f64;
     if let Some(e) = out.error {
         println!("scale system={} n={} error=\"{e}\"", case.system, case.n);
         return;

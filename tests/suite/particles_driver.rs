@@ -175,3 +175,48 @@ fn a_water_box_trajectory_round_trips_through_csv() {
     assert_eq!(back, traj);
     assert_same_bits(&back, &traj);
 }
+
+/// q and p of different lengths are refused with the step's own typed
+/// error by every entry point, never a panic in building the start state.
+#[test]
+fn a_state_of_the_wrong_shape_is_refused_by_every_entry() {
+    let (mut rattle, state) = water_box();
+    let bad = ParticleState::new(state.q().to_vec(), state.p()[..3].to_vec());
+    let shape = |e: Option<StepError>| {
+        assert!(
+            matches!(
+                e,
+                Some(StepError::Shape {
+                    what: "p",
+                    got: 3,
+                    expected: 9000
+                })
+            ),
+            "{e:?}"
+        )
+    };
+    shape(rattle.step(&mut bad.clone()).err());
+    let out = rattle.run(&bad, Stop::Steps(3)).stride(2).execute();
+    assert!(out.trajectory.is_empty() && out.summary.steps == 0);
+    shape(out.error);
+    let mut in_place = bad.clone();
+    shape(rattle.run_in_place(&mut in_place, 3).error);
+    assert_eq!(in_place, bad);
+}
+
+/// A run in place in chunks reports a failure at the state's own step
+/// count and time, as `Rattle::step` does, not at the chunk's.
+#[test]
+fn a_failure_in_a_later_chunk_names_the_states_step() {
+    let (mut rattle, mut state) = water_box();
+    let out = rattle.run_in_place(&mut state, 4);
+    assert!(out.error.is_none());
+    let mut by_hand = state.clone();
+    by_hand.p_mut()[3] = 1e9;
+    state.p_mut()[3] = 1e9;
+    let e = rattle.run_in_place(&mut state, 3).error.unwrap();
+    let expected = rattle.step(&mut by_hand).unwrap_err();
+    assert_eq!((e.step(), e.time()), (5, Some(110.0)));
+    assert_eq!(e, expected);
+    assert_eq!(state.step(), 4);
+}

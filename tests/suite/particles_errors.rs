@@ -156,7 +156,10 @@ fn huge_step_fails_at_the_first_step() {
         generate::set_temperature(r.system(), &mut state, 300.0);
         let mut state = state.with_time(10.0);
         let before = state.clone();
-        let out = r.run_in_place(&mut state, 5);
+        let out = r.run(&state, Stop::Steps(5)).execute();
+        assert_eq!(out, r.run(&state, Stop::Steps(5)).execute(), "a second try");
+        // In place: the same error, and the state left as it was.
+        assert_eq!(r.run_in_place(&mut state, 5).error, out.error);
         let (traj, e) = out.into_result().unwrap_err();
         match e {
             StepError::AtMember {

@@ -2,7 +2,7 @@ use super::*;
 use crate::error::{SolveError, Stage, StepError};
 use crate::examples::Pendulum;
 use crate::particles::TopologyError;
-use crate::{Stop, StormerVerlet};
+use crate::{Stop, StormerVerlet, Trajectory};
 
 fn bits(k: usize, out: &RunOutcome) -> Vec<u64> {
     let mut w = Vec::new();
@@ -35,6 +35,36 @@ fn a_member_does_not_depend_on_its_predecessors() {
 
 /// Every error variant reads back as itself, after the trajectory and
 /// diagnostics; a truncated record is an error at every cut.
+#[test]
+fn any_number_of_distinct_names_read_back_whole() {
+    // Names and formatted reasons are owned texts: the 256 distinct
+    // messages kept for `&'static str` fields do not bound them.
+    let mut out = RunOutcome {
+        trajectory: Trajectory::default(),
+        summary: Default::default(),
+        error: None,
+    };
+    for i in 0..400 {
+        out.error = Some(if i % 2 == 0 {
+            StepError::AtMember {
+                stage: Stage::Shake,
+                step: i,
+                t: 0.5,
+                family: format!("family_{i}"),
+                member: i as usize,
+                source: SolveError::Singular { iterations: 1 },
+            }
+        } else {
+            StepError::Solver {
+                solver: "band",
+                why: format!("N's half-bandwidth is {i} (at most 64)"),
+            }
+        });
+        let (_, back, _) = unpack_outcome(&bits(1, &out)).unwrap();
+        assert_eq!(back, out);
+    }
+}
+
 #[test]
 fn every_error_round_trips() {
     let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.05)

@@ -51,6 +51,11 @@ impl Rattle {
         state: &ParticleState,
         stop: Stop,
     ) -> Run<'_, Self, fn(u64, f64, &State)> {
+        // (q and p of different lengths are not a `State`: refused here,
+        // with the step's own error.)
+        if let Err(e) = self.check_shape(&state.q, &state.p) {
+            return Run::refused(self, stop, e);
+        }
         let z0 = State::from_slices(&state.q, &state.p);
         self.start_stamp = state.stamp;
         Run::new(self, z0, stop).start_time(state.time)
@@ -58,10 +63,15 @@ impl Rattle {
 
     /// `steps` steps from `state`, leaving `state` at the last good state:
     /// step n, or step k − 1 of a run whose step k failed (then the error
-    /// is in the outcome). The molecular-dynamics loop's call: a
-    /// [`run`](Self::run) that stores the first and the last state only.
-    /// The state's step count goes up by the steps taken and its time is
-    /// t0 + k·h again (its start time t0 kept).
+    /// is in the outcome): the molecular-dynamics loop's call. It is a
+    /// [`run`](Self::run) that stores nothing (the outcome's trajectory is
+    /// empty; its summary is the call's steps); the state's step count
+    /// goes up by the steps taken, its time is t0 + k·h again (its start
+    /// time t0 kept), and an error's step counts the state's steps, as
+    /// [`step`](Self::step)'s does. Beside the state it holds two copies
+    /// of it while it runs (the driver's, and the one it shows), none per
+    /// step; a run continued from where the last one stopped keeps the
+    /// caches and takes the same steps as one run.
     ///
     /// ```
     /// use geoshake_runtime::particles::{generate, Options, Rattle};
@@ -76,22 +86,36 @@ impl Rattle {
     /// assert_eq!((state.step(), state.time()), (30, 60.0));
     /// ```
     pub fn run_in_place(&mut self, state: &mut ParticleState, steps: u64) -> RunOutcome {
-        let out = self
-            .run(state, Stop::Steps(steps))
+        let first = state.step;
+        let mut last = 0;
+        let run = self.run(state, Stop::Steps(steps));
+        // The observer sees the start, the end and, on failure, the last
+        // good state: the latest one seen is where the state ends.
+        let mut out = run
             .stride(steps.max(1))
+            .store(false)
+            .observe(|k, _, z| {
+                if k > 0 {
+                    state.q.copy_from_slice(z.q.as_slice());
+                    state.p.copy_from_slice(z.p.as_slice());
+                    last = k;
+                }
+            })
             .execute();
-        if let Some(i) = out.trajectory.len().checked_sub(1)
-            && out.trajectory.step(i) > 0
-        {
-            state.q_mut().copy_from_slice(out.trajectory.q(i));
-            state.p_mut().copy_from_slice(out.trajectory.p(i));
-            state.step += out.trajectory.step(i);
+        if last > 0 {
+            state.step = first + last;
             state.time = state.t0 + state.step as f64 * self.step_size();
-            // The state is the last one the run's steps made (unless the
-            // run failed): the next run continues with its caches.
-            if out.error.is_none() {
-                state.stamp = self.last_stamp();
-            }
+            // The state is the one the last step made, unless the run
+            // failed: then the caches are not its own.
+            state.stamp = if out.error.is_none() {
+                self.last_stamp()
+            } else {
+                0
+            };
+        }
+        if let Some(e) = out.error.take() {
+            let (k, t) = (first + e.step(), e.time().unwrap_or(f64::NAN));
+            out.error = Some(e.at(k, t));
         }
         out
     }

@@ -111,6 +111,9 @@ pub struct Run<'a, T, F> {
     t0: f64,
     observer: F,
     on_step: Option<&'a mut StepObserver<'a>>,
+    /// Set when the run was refused while it was being set up (a start
+    /// state that is not even a state): `execute` returns it.
+    refused: Option<StepError>,
 }
 
 impl<'a, T> Run<'a, T, fn(u64, f64, &State)> {
@@ -126,6 +129,16 @@ impl<'a, T> Run<'a, T, fn(u64, f64, &State)> {
             t0: 0.0,
             observer: |_, _, _| {},
             on_step: None,
+            refused: None,
+        }
+    }
+
+    /// A run that `execute` refuses with `e` before anything else (the
+    /// start state could not be made a [`State`]).
+    pub(crate) fn refused(integ: &'a mut T, stop: Stop, e: StepError) -> Self {
+        Run {
+            refused: Some(e),
+            ..Run::new(integ, State::from_slices(&[], &[]), stop)
         }
     }
 }
@@ -197,6 +210,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             stride: self.stride,
             store: self.store,
             t0: self.t0,
+            refused: self.refused,
             observer,
             on_step: self.on_step,
         }
@@ -251,6 +265,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             t0,
             mut observer,
             mut on_step,
+            refused,
         } = self;
         let mut traj = Trajectory::default();
         let mut summary = RunSummary::default();
@@ -259,6 +274,9 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             summary,
             error: Some(e),
         };
+        if let Some(e) = refused {
+            return fail(traj, summary, e);
+        }
         if let Err(e) = integ
             .check_start(&z0)
             .and_then(|_| StepError::finite_input("start time must be finite", t0))
@@ -319,15 +337,18 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
         };
         let mut q: Vec<f64> = z0.q.as_slice().to_vec();
         let mut p: Vec<f64> = z0.p.as_slice().to_vec();
-        // A stepper whose failed step leaves (q, p) as they were needs no
-        // copy of the state before each step.
-        let atomic = integ.atomic_steps();
-        let mut prev_q = q.clone();
-        let mut prev_p = p.clone();
         let mut scratch = z0;
         let Projection { per_step, lazy } = match integ.begin_run(&mut q, &mut p, t0) {
             Ok(projection) => projection,
             Err(e) => return fail(traj, summary, e),
+        };
+        // A stepper whose failed step leaves (q, p) as they were needs no
+        // copy of the state before each step (a lazy run replays into it).
+        let atomic = integ.atomic_steps() && !lazy;
+        let (mut prev_q, mut prev_p) = if atomic {
+            (Vec::new(), Vec::new())
+        } else {
+            (q.clone(), p.clone())
         };
         let mut acc = Accumulator::default();
         if let Err(e) = integ.record(
@@ -347,7 +368,11 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
         let mut last_recorded = 0;
         // A lazily projecting RATTLE run keeps the SHAKE state of its last
         // stored step, to replay from it on failure (`Stepper::replay`).
-        let (mut rec_q, mut rec_p) = (q.clone(), p.clone());
+        let (mut rec_q, mut rec_p) = if lazy {
+            (q.clone(), p.clone())
+        } else {
+            (Vec::new(), Vec::new())
+        };
         // The common case, one fixed-size classical substep a step and
         // nothing to see between stored states, loops inside that step
         // (`lane`); on an error it hands it over here, at the

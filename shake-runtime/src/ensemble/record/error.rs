@@ -211,7 +211,7 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
         13 => {
             let (stage, step, t) = (r.stage()?, r.word()?, r.float()?);
             let member = r.index("member")?;
-            let family = r.string()?.to_string();
+            let family = r.text()?;
             let source = unpack_solve(r)?.ok_or(RecordError::Corrupted {
                 what: "solve error",
                 value: 13,
@@ -227,7 +227,7 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
         }
         14 => StepError::Solver {
             solver: r.string()?,
-            why: r.string()?.to_string(),
+            why: r.text()?,
         },
         15 => StepError::Topology(unpack_topology(r)?),
         11 => StepError::Storage {
@@ -270,7 +270,7 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
             t: r.float()?,
             residual: r.float()?,
             tolerance: r.float()?,
-            constraint: r.string()?.to_string(),
+            constraint: r.text()?,
             cause: unpack_solve(r)?,
         },
         10 => {
@@ -429,7 +429,7 @@ fn unpack_topology(r: &mut Reader) -> Result<TopologyError, RecordError> {
         }
     };
     // The family's name comes last (its length is known only there).
-    let name = r.string()?.to_string();
+    let name = r.text()?;
     match &mut e {
         TopologyError::RowShape { family, .. }
         | TopologyError::RepeatedParticle { family, .. }
@@ -500,6 +500,11 @@ impl Reader<'_> {
             })
     }
     fn string(&mut self) -> Result<&'static str, RecordError> {
+        self.text().map(intern)
+    }
+    /// An owned text (a name or a formatted reason: not interned, so that
+    /// any number of distinct ones read back whole).
+    fn text(&mut self) -> Result<String, RecordError> {
         let len = self.index("message length")?;
         let bytes: Vec<u8> = self
             .slice(len.div_ceil(8))?
@@ -511,6 +516,6 @@ impl Reader<'_> {
             what: "message",
             value: len as u64,
         })?;
-        Ok(intern(s))
+        Ok(s)
     }
 }
