@@ -22,19 +22,10 @@ use geoshake::sampler::{sample, Estimate, SamplerOptions, Samples};
 use geoshake::ConstrainedSystem;
 
 mod targets;
-use targets::{Rotation, Sphere, Torus, VonMisesFisher, Wavy};
+use targets::{simpson, Rotation, Sphere, Torus, VonMisesFisher, Wavy};
 
 /// An expectation: its name, f, and the exact value.
 type Expectation = (&'static str, fn(&[f64]) -> f64, f64);
-
-fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
-    let h = (b - a) / n as f64;
-    let mut s = f(a) + f(b);
-    for k in 1..n {
-        s += f(a + k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 };
-    }
-    s * h / 3.0
-}
 
 fn options() -> SamplerOptions {
     SamplerOptions {

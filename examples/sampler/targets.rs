@@ -69,3 +69,15 @@ constrained_system! {
         constraints { graph: q[1] - a * sin(w * q[0]) }
     }
 }
+
+/// Composite Simpson's rule on [a, b] with n (even) panels: the exact
+/// expectations the samples are compared with, for the example and the
+/// tests alike.
+pub fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+    let h = (b - a) / n as f64;
+    let mut s = f(a) + f(b);
+    for k in 1..n {
+        s += f(a + k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    s * h / 3.0
+}

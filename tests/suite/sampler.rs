@@ -59,7 +59,7 @@ const ESS_MIN: f64 = 400.0;
 
 #[path = "../../examples/sampler/targets.rs"]
 mod targets;
-use targets::{Rotation, Sphere, Torus, VonMisesFisher, Wavy};
+use targets::{simpson, Rotation, Sphere, Torus, VonMisesFisher, Wavy};
 
 constrained_system! {
     /// The unit circle with U = √y: NaN on the lower half, so the target
@@ -163,16 +163,6 @@ fn options(seed: u64) -> SamplerOptions {
 }
 
 const JITTER: f64 = 0.5;
-
-/// Composite Simpson's rule on [a, b] with n (even) panels.
-fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
-    let h = (b - a) / n as f64;
-    let mut s = f(a) + f(b);
-    for k in 1..n {
-        s += f(a + k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 };
-    }
-    s * h / 3.0
-}
 
 /// Four starts spread over S².
 const SPHERE_STARTS: [[f64; 3]; 4] = [
