@@ -14,9 +14,10 @@
 //! # Scope
 //!
 //! - Positions x_a ∈ R^D of n particles with masses m_a; momenta p_a.
-//! - H = Σ_a |p_a|²/(2 m_a) + V(x), V a sum of potential families (possibly
-//!   none): separable with quadratic kinetic energy, so Störmer–Verlet is
-//!   explicit and the base map of these runs.
+//! - H = Σ_a |p_a|²/(2 m_a) + V(x), V a sum of potential families and of
+//!   forces the user brings ([`ForceField`]), possibly none: separable with
+//!   quadratic kinetic energy, so Störmer–Verlet is explicit and the base
+//!   map of these runs.
 //! - Holonomic constraints g_k(x) = 0 only. Coisotropy then holds trivially
 //!   ({g_i, g_j} = 0 for any g(q)), and N = G M⁻¹ Gᵀ (G = g_x) is
 //!   symmetric positive definite exactly when G has full rank: the one
@@ -59,6 +60,7 @@
 
 mod cluster;
 mod error;
+mod forces;
 pub mod generate;
 mod global;
 mod graph;
@@ -74,6 +76,7 @@ mod table;
 
 pub use crate::report::StepInfo;
 pub use error::TopologyError;
+pub use forces::ForceField;
 pub use options::{Method, Options, SolverChoice};
 #[doc(hidden)]
 pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};

@@ -74,8 +74,10 @@ pub struct Rattle {
     pn: Vec<f64>,
     force: Vec<f64>,
     has_potential: bool,
-    /// The forces in `force` are ∇V(q) of the state with this stamp.
+    /// The forces in `force` are ∇V(q), and `potential` is V(q), of the
+    /// state with this stamp.
     force_stamp: u64,
+    potential: f64,
     stamp: u64,
     /// In a run on the driver: the start time t0 and the stamp of the
     /// state the last step made (the driver holds that state's buffers).
@@ -144,7 +146,7 @@ impl Rattle {
             Path::Global(Box::new(Global::new(&system, &num, &comps, solver)))
         };
         let d = system.particles() * system.dim();
-        let has_potential = !system.potential_families().is_empty();
+        let has_potential = system.has_potential();
         Ok(Rattle {
             h,
             options,
@@ -159,6 +161,7 @@ impl Rattle {
             },
             has_potential,
             force_stamp: 0,
+            potential: f64::NAN,
             stamp: 0,
             run_t0: 0.0,
             run_stamp: 0,
@@ -293,14 +296,52 @@ impl Rattle {
         }
     }
 
-    /// ∇V(q) into `self.force`; a non-finite force is reported at the
-    /// entry of p it would change.
+    /// ∇V(q) into `self.force` and V(q) into `self.potential`; a
+    /// non-finite force is reported at the entry of p it would change.
     fn forces(&mut self, q: &[f64], step: u64, time: f64) -> Result<(), StepError> {
-        self.force.fill(0.0);
-        for f in self.system.potential_families() {
-            f.energy_gradient(q, &mut self.force);
-        }
+        // Until the caller says whose they are, the forces are nobody's.
+        self.force_stamp = 0;
+        self.potential = self.system.potential_gradient(q, &mut self.force);
         Self::not_finite(step, time, "forces ∇V(q)", &self.force, q.len())
+    }
+
+    /// The potential energy V(q) = Σ_fam V_fam(q) + V_ext(q) of `state`
+    /// (0 without a potential): read from the last step when `state` is
+    /// the one it made, else one evaluation of the forces, which the next
+    /// step from `state` then reuses. With
+    /// [`ParticleSystem::kinetic_energy`] this gives H along a run at no
+    /// extra cost.
+    ///
+    /// ```
+    /// use geoshake_runtime::particles::{generate, Options, Rattle};
+    /// let (system, mut state) = generate::water(8, 1).unwrap();
+    /// // A weak harmonic tether of every atom to the origin, brought as forces.
+    /// let system = system.with_forces(|q: &[f64], f: &mut [f64]| {
+    ///     f.iter_mut().zip(q).for_each(|(f, q)| *f -= 1e-3 * q);
+    ///     0.5e-3 * q.iter().map(|q| q * q).sum::<f64>()
+    /// });
+    /// let mut rattle = Rattle::new(system, 1.0, Options::default()).unwrap();
+    /// rattle.project(&mut state).unwrap();
+    /// generate::set_temperature(rattle.system(), &mut state, 300.0);
+    /// let energy = |r: &mut Rattle, s: &_| {
+    ///     r.potential_energy(s).unwrap() + r.system().kinetic_energy(s.p())
+    /// };
+    /// let h0 = energy(&mut rattle, &state);
+    /// assert!(rattle.run_in_place(&mut state, 100).error.is_none());
+    /// assert!(((energy(&mut rattle, &state) - h0) / h0).abs() < 1e-3);
+    /// ```
+    pub fn potential_energy(&mut self, state: &ParticleState) -> Result<f64, StepError> {
+        self.check_shape(&state.q, &state.p)?;
+        if !self.has_potential {
+            return Ok(0.0);
+        }
+        if state.stamp == 0 || self.force_stamp != state.stamp {
+            self.forces(&state.q, state.step, state.time)?;
+            // The forces now held are this state's (a state changed by hand
+            // has stamp 0 and ties to nothing).
+            self.force_stamp = state.stamp;
+        }
+        Ok(self.potential)
     }
 
     /// A cluster kernel's failure in `stage`, at its family's member.

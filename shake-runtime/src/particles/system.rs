@@ -2,7 +2,7 @@
 
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 use super::stencil::extent2;
-use super::{Stencil, Table, TopologyError};
+use super::{ForceField, Stencil, Table, TopologyError};
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
 /// evaluated through one [`Stencil`]. Constraint k of the family is
@@ -297,8 +297,9 @@ impl<S: Stencil> PotentialFamily for Family<S> {
     }
 }
 
-/// n particles in R^D with masses, constraint families and potential
-/// families: H = Σ_a |p_a|²/(2 m_a) + Σ_fam V_fam(x), g = (g_fam)_fam.
+/// n particles in R^D with masses, constraint families, potential
+/// families and forces the user brings ([`ForceField`]):
+/// H = Σ_a |p_a|²/(2 m_a) + Σ_fam V_fam(x) + V_ext(x), g = (g_fam)_fam.
 ///
 /// Coordinates are stored particle by particle: x_a's c-th coordinate is
 /// `q[a * D + c]`, and likewise for p. Constraints are numbered family by
@@ -329,6 +330,7 @@ pub struct ParticleSystem {
     inverse_masses: Vec<f64>,
     constraints: Vec<Box<dyn ConstraintFamily>>,
     potentials: Vec<Box<dyn PotentialFamily>>,
+    external: Option<Box<dyn ForceField>>,
 }
 
 impl ParticleSystem {
@@ -354,6 +356,7 @@ impl ParticleSystem {
             inverse_masses,
             constraints: Vec::new(),
             potentials: Vec::new(),
+            external: None,
         })
     }
 
@@ -381,6 +384,13 @@ impl ParticleSystem {
         let family = self.family(name, stencil, table, false)?;
         self.potentials.push(Box::new(family));
         Ok(self)
+    }
+
+    /// Adds the forces of an external potential V_ext, evaluated by the
+    /// user's code ([`ForceField`]); replaces one given before.
+    pub fn with_forces(mut self, field: impl ForceField + 'static) -> Self {
+        self.external = Some(Box::new(field));
+        self
     }
 
     /// Validates a table against a stencil and this system's particles.
@@ -487,5 +497,49 @@ impl ParticleSystem {
     /// The potential families, in the order they were added.
     pub fn potential_families(&self) -> &[Box<dyn PotentialFamily>] {
         &self.potentials
+    }
+
+    /// True when forces were brought with [`with_forces`](Self::with_forces).
+    pub fn has_forces(&self) -> bool {
+        self.external.is_some()
+    }
+
+    /// True when H has a potential: a potential family or brought forces.
+    pub fn has_potential(&self) -> bool {
+        !self.potentials.is_empty() || self.external.is_some()
+    }
+
+    /// The kinetic energy Σ_a |p_a|²/(2 m_a) of momenta `p` (n·D entries).
+    ///
+    /// ```
+    /// use geoshake_runtime::particles::ParticleSystem;
+    /// let s = ParticleSystem::new(2, vec![1.0, 4.0]).unwrap();
+    /// assert_eq!(s.kinetic_energy(&[1.0, 0.0, 0.0, 2.0]), 0.5 + 0.5);
+    /// ```
+    pub fn kinetic_energy(&self, p: &[f64]) -> f64 {
+        let d = self.dim;
+        let mut two_k = 0.0;
+        for (a, w) in self.inverse_masses.iter().enumerate() {
+            two_k += w * p[a * d..(a + 1) * d].iter().map(|p| p * p).sum::<f64>();
+        }
+        0.5 * two_k
+    }
+
+    /// V(q) = Σ_fam V_fam(q) + V_ext(q), with ∇V(q) written into `grad`
+    /// (n·D entries): the brought forces (negated) first, then every
+    /// family's gradient added.
+    pub(crate) fn potential_gradient(&mut self, q: &[f64], grad: &mut [f64]) -> f64 {
+        grad.fill(0.0);
+        let mut v = 0.0;
+        if let Some(field) = &mut self.external {
+            v += field.forces(q, grad);
+            for g in grad.iter_mut() {
+                *g = -*g;
+            }
+        }
+        for f in &self.potentials {
+            v += f.energy_gradient(q, grad);
+        }
+        v
     }
 }
