@@ -41,6 +41,7 @@ mod paper_hopf;
 mod particles_alloc;
 mod particles_driver;
 mod particles_errors;
+mod particles_forces;
 mod particles_paths;
 mod particles_result_scale;
 mod particles_review;
