@@ -304,24 +304,29 @@ pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
     1.0 / (a.sqrt() * b.sqrt()).max(f64::MIN_POSITIVE)
 }
 
-/// |a · b| / (|a| |b|): a hidden constraint ∇g · M⁻¹p relative to its
-/// scale |∇g| |M⁻¹p|, with both vectors scaled by their largest entry
-/// first, so that neither the squares nor the product of the norms can
-/// underflow or overflow (masses of 1e300 and 1e-300 made |M⁻¹p|²
-/// overflow and the ratio read 0 for a velocity 10 % off its tangent). 0
-/// when b = 0 (nothing moves: the constraint holds); NaN when a = 0 (a
-/// degenerate gradient) or either holds NaN or ∞, so that the test fails.
+/// |a · b| / (|a| · max(|b|, |b0|)): a hidden constraint ∇g · M⁻¹p
+/// relative to its scale |∇g| |M⁻¹p|, for a velocity b left by a
+/// projection from b0 (with |b0|² = `b0_sq`; 0 when there was none). An exact projection
+/// leaves a residual of about κ ε |a| |b0|, so the velocity it started from
+/// sets the scale: the one it leaves may be all round-off (a dimer moving
+/// along its bond is left at rest, |b| ≈ ε |b0|, and |a · b| / (|a| |b|)
+/// is then of order 1 however good the solve). Outside the range where
+/// the squares are safe, both vectors are scaled by their largest entry
+/// first, with b's own scale (the stricter test), so that neither the
+/// squares nor the product of the norms can underflow or overflow (masses
+/// of 1e300 and 1e-300 made |M⁻¹p|² overflow and the ratio read 0 for a
+/// velocity 10 % off its tangent). 0 when b = 0 (nothing moves: the
+/// constraint holds); NaN when a = 0 (a degenerate gradient) or either
+/// holds NaN or ∞, so that the test fails.
 #[inline(always)]
-pub(crate) fn relative_dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn relative_dot_after(a: &[f64], b: &[f64], b0_sq: f64) -> f64 {
     let (mut dot, mut aa, mut bb) = (0.0, 0.0, 0.0);
     for (x, y) in a.iter().zip(b) {
         dot += x * y;
         aa += x * x;
         bb += y * y;
     }
-    // The sums as they are when nothing over- or underflowed: both well
-    // inside the range (so no term that matters fell below it) and their
-    // product finite.
+    let bb = bb.max(b0_sq);
     let ab = aa * bb;
     if aa > 1e-200 && bb > 1e-200 && ab < f64::INFINITY {
         return dot.abs() / ab.sqrt();
@@ -329,7 +334,7 @@ pub(crate) fn relative_dot(a: &[f64], b: &[f64]) -> f64 {
     relative_dot_scaled(a, b)
 }
 
-/// [`relative_dot`] with both vectors scaled by their largest entry.
+/// [`relative_dot_after`] with both vectors scaled by their largest entry.
 #[cold]
 fn relative_dot_scaled(a: &[f64], b: &[f64]) -> f64 {
     // (`f64::max` drops NaN, so finiteness is asked first.)
@@ -356,7 +361,7 @@ fn relative_dot_scaled(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The largest relative hidden-constraint residual (|∇g · M⁻¹p| over
-/// |∇g| |M⁻¹p|, [`relative_dot`]) a particle projection may leave. The
+/// |∇g| |M⁻¹p|, [`relative_dot_after`]) a particle projection may leave. The
 /// projection solves N μ = G M⁻¹ p exactly, so it leaves about κ(N) ε;
 /// above √ε, κ(N) exceeds 1/√ε and N is singular to half the working
 /// precision (a triangle forced collinear left 1.7e-6, masses of 1e300 and

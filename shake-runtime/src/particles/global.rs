@@ -28,6 +28,8 @@ pub(super) struct Global {
     pub(super) g: Vec<f64>,
     pub(super) nu: Vec<f64>,
     pub(super) delta: Vec<f64>,
+    /// |M⁻¹ p|² over each member's particles before the velocity stage.
+    pub(super) before: Vec<f64>,
     /// N's factor holds N(q) of the state with this stamp (0: none).
     pub(super) factor_stamp: u64,
 }
@@ -81,6 +83,7 @@ impl Global {
             g: vec![0.0; m],
             nu: vec![0.0; m],
             delta: vec![0.0; m],
+            before: vec![0.0; m],
             factor_stamp: 0,
         }
     }
@@ -97,7 +100,8 @@ impl Global {
                 + self.scale1.capacity()
                 + self.g.capacity()
                 + self.nu.capacity()
-                + self.delta.capacity())
+                + self.delta.capacity()
+                + self.before.capacity())
     }
 
     /// Gradients and scales at q into (grad, scale); every family.
@@ -356,6 +360,7 @@ impl Global {
                 inv_m,
                 p,
                 &mut self.delta[c0..c1],
+                &mut self.before[c0..c1],
                 ratio,
             );
             worst = worst.max(w);

@@ -50,9 +50,13 @@ pub trait ConstraintFamily: ClusterKernel + Send + Sync {
         factor: f64,
         out: &mut [f64],
     );
-    /// out_k ← ∇g_k · M⁻¹ p for every member (gradients in `grad`); with
-    /// `ratio`, returns max_k |out_k| / (|∇g_k| · |M⁻¹ p| over k's
-    /// particles), the relative hidden-constraint residual (NaN if any is).
+    /// out_k ← ∇g_k · M⁻¹ p for every member (gradients in `grad`).
+    /// Without `ratio`, before a projection: `before_k` ← |M⁻¹ p|² over
+    /// k's particles. With `ratio`, after it: returns max_k |out_k| /
+    /// (|∇g_k| · |M⁻¹ p| over k's particles), the relative
+    /// hidden-constraint residual (NaN if any is), where it fails the
+    /// round-off limit with max(|M⁻¹ p|, √before_k) instead (the
+    /// velocity the projection started from: `relative_dot_after`).
     #[doc(hidden)]
     fn hidden(
         &self,
@@ -60,6 +64,7 @@ pub trait ConstraintFamily: ClusterKernel + Send + Sync {
         inv_mass: &[f64],
         p: &[f64],
         out: &mut [f64],
+        before: &mut [f64],
         ratio: bool,
     ) -> f64;
 }
@@ -238,6 +243,7 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         inv_mass: &[f64],
         p: &[f64],
         out: &mut [f64],
+        before: &mut [f64],
         ratio: bool,
     ) -> f64 {
         let (d, ar) = (S::DIM, S::ARITY);
@@ -258,10 +264,16 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
             }
             out[k] = s;
             if ratio {
-                let r = crate::tolerance::relative_dot(gk, &v[..w]);
+                use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
+                let mut r = relative_dot_after(gk, &v[..w], 0.0);
+                if !(r <= HIDDEN_LIMIT) {
+                    r = relative_dot_after(gk, &v[..w], before[k]);
+                }
                 if !(r <= worst) {
                     worst = r;
                 }
+            } else {
+                before[k] = v[..w].iter().map(|v| v * v).sum();
             }
         }
         worst

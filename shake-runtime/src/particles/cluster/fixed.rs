@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::particles::stencil::member_scale;
-use crate::tolerance::{relative_dot, HIDDEN_LIMIT};
+use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
 /// Largest ARITY and DIM of a stencil the fixed-size kernel takes.
 pub(super) const FX: usize = 3;
@@ -336,12 +336,16 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             });
         }
         small_apply(MC, &n[..MC * MC], &mut r[..MC]);
+        // p′, for the rare member whose velocity the projection cancels.
+        let before = pl;
         for l in 0..MC {
             axpy_block::<S, NX>(&sl[l], r[l], &gr[l], &mut pl);
         }
         // Hidden constraints after projection, relative to |∇g_j| ·
-        // |velocity of the member's particles|: above round-off after an
-        // exact solve (or NaN), N is singular to working precision.
+        // |velocity of the member's particles| after the projection, or if
+        // that fails before it (`relative_dot_after`): above round-off
+        // after an exact solve (or NaN), N is singular to working
+        // precision.
         let mut worst = 0.0f64;
         let mut worst_j = 0;
         for j in 0..MC {
@@ -352,7 +356,17 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
                     v[t * d + k] = wx[i] * pl[i];
                 }
             }
-            let rel = relative_dot(&gr[j][..wd], &v[..wd]);
+            let mut rel = relative_dot_after(&gr[j][..wd], &v[..wd], 0.0);
+            if !(rel <= HIDDEN_LIMIT) {
+                let mut b0 = 0.0;
+                for t in 0..ar {
+                    for k in 0..d {
+                        let i = sl[j][t] * d + k;
+                        b0 += (wx[i] * before[i]).powi(2);
+                    }
+                }
+                rel = relative_dot_after(&gr[j][..wd], &v[..wd], b0);
+            }
             if !(rel <= worst) {
                 worst = rel;
                 worst_j = j;

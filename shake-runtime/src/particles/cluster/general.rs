@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::particles::stencil::member_scale;
-use crate::tolerance::{relative_dot, HIDDEN_LIMIT};
+use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
 pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
 
@@ -83,6 +83,17 @@ impl Local {
         } else if !cholesky_solve(mc, &mut self.n[..mc * mc], &mut self.g[..mc]) {
             return None;
         }
+        // |W p′|² over each member's particles, before the projection.
+        let mut before = [0.0; MAX_CLUSTER];
+        for (j, b) in before.iter_mut().enumerate().take(mc) {
+            let sj = &slots[j * ar..(j + 1) * ar];
+            for &s in sj {
+                let s = s as usize;
+                for k in 0..d {
+                    *b += (self.wm[s] * self.pl[s * d + k]).powi(2);
+                }
+            }
+        }
         for l in 0..mc {
             let mu = self.g[l];
             let sl = &slots[l * ar..(l + 1) * ar];
@@ -95,7 +106,8 @@ impl Local {
             }
         }
         // The hidden constraints after projection, relative to
-        // |∇g_j| · |velocity of the member's particles|.
+        // |∇g_j| · |velocity of the member's particles| after the
+        // projection, or if that fails before it (`relative_dot_after`).
         let mut worst = 0.0f64;
         for j in 0..mc {
             let sj = &slots[j * ar..(j + 1) * ar];
@@ -107,7 +119,10 @@ impl Local {
                     v[a * d + k] = self.wm[s] * self.pl[s * d + k];
                 }
             }
-            let rel = relative_dot(gj, &v[..wd]);
+            let mut rel = relative_dot_after(gj, &v[..wd], 0.0);
+            if !(rel <= HIDDEN_LIMIT) {
+                rel = relative_dot_after(gj, &v[..wd], before[j]);
+            }
             if !(rel <= worst) {
                 worst = rel;
             }
