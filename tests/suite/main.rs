@@ -42,6 +42,7 @@ mod particles_alloc;
 mod particles_driver;
 mod particles_errors;
 mod particles_forces;
+mod particles_langevin;
 mod particles_paths;
 mod particles_result_scale;
 mod particles_review;

@@ -64,6 +64,7 @@ mod forces;
 pub mod generate;
 mod global;
 mod graph;
+mod langevin;
 mod options;
 mod plan;
 mod rattle;
@@ -77,6 +78,7 @@ mod table;
 pub use crate::report::StepInfo;
 pub use error::TopologyError;
 pub use forces::ForceField;
+pub use langevin::Langevin;
 pub use options::{Method, Options, SolverChoice};
 #[doc(hidden)]
 pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};

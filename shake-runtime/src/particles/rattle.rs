@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::global::Global;
 use super::graph::{self, Numbering};
+use super::langevin::Langevin;
 use super::options::{Method, Options, SolverChoice};
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
 use super::{ParticleState, ParticleSystem};
@@ -65,15 +66,15 @@ enum Path {
 /// assert_eq!(state.step(), 10);
 /// ```
 pub struct Rattle {
-    system: ParticleSystem,
-    h: f64,
+    pub(super) system: ParticleSystem,
+    pub(super) h: f64,
     options: Options,
     num: Numbering,
     path: Path,
-    qn: Vec<f64>,
-    pn: Vec<f64>,
-    force: Vec<f64>,
-    has_potential: bool,
+    pub(super) qn: Vec<f64>,
+    pub(super) pn: Vec<f64>,
+    pub(super) force: Vec<f64>,
+    pub(super) has_potential: bool,
     /// The forces in `force` are ∇V(q), and `potential` is V(q), of the
     /// state with this stamp.
     force_stamp: u64,
@@ -86,6 +87,17 @@ pub struct Rattle {
     /// The stamp of the state a run was asked to start from: a state this
     /// solver made and nobody changed since continues with its caches.
     pub(super) start_stamp: u64,
+    /// The step count of the state a run was asked to start from, and of
+    /// the run's start: the driver numbers a run's steps from 1, the
+    /// thermostat's noise by the state's own count (`step_offset` during a
+    /// driver's step, 0 otherwise).
+    pub(super) start_step: u64,
+    pub(super) run_step0: u64,
+    pub(super) step_offset: u64,
+    /// With a thermostat, a step is (g-)BAOAB (`langevin.rs`).
+    pub(super) thermostat: Option<Langevin>,
+    /// The drift substeps' start positions (empty without a thermostat).
+    pub(super) q0: Vec<f64>,
 }
 
 impl Rattle {
@@ -166,6 +178,11 @@ impl Rattle {
             run_t0: 0.0,
             run_stamp: 0,
             start_stamp: 0,
+            start_step: 0,
+            run_step0: 0,
+            step_offset: 0,
+            thermostat: None,
+            q0: Vec::new(),
             system,
         })
     }
@@ -235,7 +252,7 @@ impl Rattle {
     /// True when the cluster path does the velocity stage inside the
     /// position stage (RATTLE without potential: p′ = p½, so each cluster
     /// is projected while its numbers are in L1).
-    fn fused(&self) -> bool {
+    pub(super) fn fused(&self) -> bool {
         matches!(self.path, Path::Clusters { .. })
             && !self.has_potential
             && self.options.method == Method::Rattle
@@ -253,6 +270,7 @@ impl Rattle {
     pub(super) fn run_from(&mut self, t0: f64) {
         self.run_t0 = t0;
         self.run_stamp = std::mem::take(&mut self.start_stamp);
+        self.run_step0 = std::mem::take(&mut self.start_step);
     }
 
     /// The stamp of the state the last successful step made (0 when the
@@ -298,7 +316,7 @@ impl Rattle {
 
     /// ∇V(q) into `self.force` and V(q) into `self.potential`; a
     /// non-finite force is reported at the entry of p it would change.
-    fn forces(&mut self, q: &[f64], step: u64, time: f64) -> Result<(), StepError> {
+    pub(super) fn forces(&mut self, q: &[f64], step: u64, time: f64) -> Result<(), StepError> {
         // Until the caller says whose they are, the forces are nobody's.
         self.force_stamp = 0;
         self.potential = self.system.potential_gradient(q, &mut self.force);
@@ -372,8 +390,10 @@ impl Rattle {
     }
 
     /// One step of the method from `state` (step k − 1 at t0 + (k−1)h) to
-    /// step k at t0 + k·h, in place. On failure the state is left as it was
-    /// and the error names step k and time t0 + k·h.
+    /// step k at t0 + k·h, in place: RATTLE (or SHAKE), or with a
+    /// [`Langevin`] thermostat ([`set_thermostat`](Self::set_thermostat))
+    /// a (g-)BAOAB step. On failure the state is left as it was and the
+    /// error names step k and time t0 + k·h.
     pub fn step(&mut self, state: &mut ParticleState) -> Result<StepInfo, StepError> {
         self.check_shape(&state.q, &state.p)?;
         let k = state.step + 1;
@@ -386,8 +406,6 @@ impl Rattle {
                 value: time,
             });
         }
-        let (h, half) = (self.h, 0.5 * self.h);
-        let d = self.system.dim();
         let continued = state.stamp != 0 && state.stamp == self.stamp;
         // The caches (N's factor, ν, forces) are about to be overwritten: a
         // step that fails half-way must not leave them claiming a state.
@@ -396,10 +414,49 @@ impl Rattle {
             Self::not_finite(k, time, "initial state", &state.q, 0)?;
             Self::not_finite(k, time, "initial state", &state.p, state.q.len())?;
         }
-        // p̃ = p0 − (h/2) ∇V(q0), q̃ = q0 + h M⁻¹ p̃.
         if self.has_potential && !(continued && self.force_stamp == state.stamp) {
             self.forces(&state.q, k, time)?;
         }
+        let mut report = particle_report();
+        match self.thermostat {
+            Some(th) => self.langevin_step(th, state, k, time, &mut report)?,
+            None => self.rattle_step(state, continued, k, time, &mut report)?,
+        }
+        Self::not_finite(k, time, "state", &self.qn, 0)?;
+        Self::not_finite(k, time, "state", &self.pn, self.qn.len())?;
+        std::mem::swap(&mut state.q, &mut self.qn);
+        std::mem::swap(&mut state.p, &mut self.pn);
+        state.step = k;
+        state.time = time;
+        let s = self.new_stamp();
+        state.stamp = s;
+        self.force_stamp = if self.has_potential { s } else { 0 };
+        let projected = self.options.method == Method::Rattle;
+        let langevin = self.thermostat.is_some();
+        match &mut self.path {
+            // RATTLE factorised N(q1): the next step's N(q0).
+            Path::Global(g) => g.factor_stamp = if projected { s } else { 0 },
+            // ν of a full step's position stage (not of a drift's), the
+            // next step's first guess.
+            Path::Clusters { nu_stamp, .. } => *nu_stamp = if langevin { 0 } else { s },
+        }
+        Ok(report)
+    }
+
+    /// One RATTLE (or SHAKE) step into `self.qn`, `self.pn` from `state`,
+    /// the forces of `state.q` already in `self.force`:
+    /// p̃ = p0 − (h/2) ∇V(q0), q̃ = q0 + h M⁻¹ p̃, the position stage,
+    /// p′ = p½ − (h/2) ∇V(q1), the velocity stage.
+    fn rattle_step(
+        &mut self,
+        state: &ParticleState,
+        continued: bool,
+        k: u64,
+        time: f64,
+        report: &mut StepInfo,
+    ) -> Result<(), StepError> {
+        let (h, half) = (self.h, 0.5 * self.h);
+        let d = self.system.dim();
         let inv_m = self.system.inverse_masses();
         for a in 0..inv_m.len() {
             let w = h * inv_m[a];
@@ -413,17 +470,7 @@ impl Rattle {
                 self.qn[c] = state.q[c] + w * pt;
             }
         }
-        let mut report = particle_report();
-        // The position stage.
-        self.position_stage(
-            &state.q,
-            state.stamp,
-            continued,
-            1.0 / h,
-            k,
-            time,
-            &mut report,
-        )?;
+        self.position_stage(&state.q, state.stamp, continued, 1.0 / h, k, time, report)?;
         // p′ = p½ − (h/2) ∇V(q1).
         if self.has_potential {
             let q1 = std::mem::take(&mut self.qn);
@@ -436,32 +483,12 @@ impl Rattle {
         }
         if self.options.method == Method::Rattle {
             if !self.fused() {
-                self.velocity_stage(k, time, &mut report)?;
+                self.velocity_stage(k, time, report)?;
             }
             // One linear solve with N = G M⁻¹ Gᵀ.
             report.rattle_iterations = 1;
         }
-        Self::not_finite(k, time, "state", &self.qn, 0)?;
-        Self::not_finite(k, time, "state", &self.pn, self.qn.len())?;
-        std::mem::swap(&mut state.q, &mut self.qn);
-        std::mem::swap(&mut state.p, &mut self.pn);
-        state.step = k;
-        state.time = time;
-        let s = self.new_stamp();
-        state.stamp = s;
-        self.force_stamp = if self.has_potential { s } else { 0 };
-        match &mut self.path {
-            // RATTLE factorised N(q1): the next step's N(q0).
-            Path::Global(g) => {
-                g.factor_stamp = if self.options.method == Method::Rattle {
-                    s
-                } else {
-                    0
-                };
-            }
-            Path::Clusters { nu_stamp, .. } => *nu_stamp = s,
-        }
-        Ok(report)
+        Ok(())
     }
 
     /// Brings initial data onto M and then onto M^H: q ← the point of M
@@ -491,7 +518,7 @@ impl Rattle {
 
     /// qn: q̃ → q1 with g(q1) = 0; pn: p̃ → p½ (unless inv_h = 0).
     #[allow(clippy::too_many_arguments)]
-    fn position_stage(
+    pub(super) fn position_stage(
         &mut self,
         q0: &[f64],
         stamp: u64,
@@ -568,7 +595,7 @@ impl Rattle {
     }
 
     /// pn ← pn − G(qn)ᵀ μ with G(qn) M⁻¹ pn = 0.
-    fn velocity_stage(
+    pub(super) fn velocity_stage(
         &mut self,
         k: u64,
         time: f64,

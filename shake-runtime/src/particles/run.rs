@@ -58,6 +58,7 @@ impl Rattle {
         }
         let z0 = State::from_slices(&state.q, &state.p);
         self.start_stamp = state.stamp;
+        self.start_step = state.step;
         Run::new(self, z0, stop).start_time(state.time)
     }
 
@@ -191,7 +192,9 @@ impl Stepper for Rattle {
             step: k - 1,
             stamp: self.run_stamp,
         };
+        self.step_offset = self.run_step0;
         let result = self.step(&mut state);
+        self.step_offset = 0;
         *q = state.q;
         *p = state.p;
         // (On failure the step left the state and the caches' stamp as
