@@ -59,3 +59,4 @@ mod sampler;
 mod scale_invariance;
 mod trajectory_csv;
 mod ui;
+mod water_md;
