@@ -61,3 +61,4 @@ mod sampler;
 mod scale_invariance;
 mod trajectory_csv;
 mod ui;
+mod water_md;

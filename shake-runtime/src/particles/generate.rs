@@ -9,10 +9,11 @@
 //! differ from NumPy's, so the boxes are statistically, not bitwise, those
 //! of `gen_data.py`.
 //!
-//! No periodic box: the runs are free flight (no forces between
-//! molecules), so wrapping would change nothing but the bookkeeping, and
-//! over 1000 steps of 2 fs a water moves ~10 Å, which the unwrapped
-//! coordinates carry without loss.
+//! The generators wrap nothing: the runs here are free flight (no forces
+//! between molecules), and over 1000 steps of 2 fs a water moves ~10 Å,
+//! which the unwrapped coordinates carry without loss. The water lattice
+//! does fill a periodic box, [`water_box`], for forces that need one
+//! (a force field with the minimum image wraps the coordinates itself).
 
 use super::stencils::{Distance, Spring};
 use super::{ParticleState, ParticleSystem, Table, TopologyError};
@@ -140,8 +141,27 @@ fn thermal_momenta(rng: &mut SplitMix64, masses: &[f64]) -> Vec<f64> {
     p
 }
 
+/// The periodic box [nx·a, ny·a, nz·a] (Å) that the lattice of
+/// [`water`]`(n, _)` fills: nx·ny·nz = n with the three as close as
+/// possible, and a = (1/[`WATER_DENSITY`])^(1/3), so that the box holds
+/// liquid water's density. The oxygens sit at the cell centres
+/// ((i + ½)·a, …); the hydrogens, 1 Å away, may lie outside it.
+///
+/// ```
+/// use geoshake_runtime::particles::generate;
+/// let [lx, ly, lz] = generate::water_box(1000);
+/// assert!(lx == ly && ly == lz && (lx - 31.06).abs() < 0.01);
+/// let n = 1000.0 / (lx * ly * lz);
+/// assert!((n - generate::WATER_DENSITY).abs() < 1e-12);
+/// ```
+pub fn water_box(n: usize) -> [f64; 3] {
+    let a = (1.0 / WATER_DENSITY).cbrt();
+    factor3(n.max(1)).map(|k| k as f64 * a)
+}
+
 /// A box of n rigid SPC/E-geometry waters (O–H 1.0 Å, H–O–H 109.47°) on a
-/// simple cubic lattice at 33.37·10⁻³ molecules/Å³, random orientations;
+/// simple cubic lattice at 33.37·10⁻³ molecules/Å³ filling the periodic
+/// box [`water_box`]`(n)`, random orientations;
 /// one constraint family `bond` of 3n distance constraints (O–H1, O–H2,
 /// H1–H2, the last at 2 R sin(θ/2), LAMMPS' `shake ... b 1 a 1`).
 /// Particles are O, H1, H2 per molecule. Momenta are Maxwell–Boltzmann in
