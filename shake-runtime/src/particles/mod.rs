@@ -74,11 +74,11 @@ mod stencil;
 pub mod stencils;
 mod system;
 mod table;
+mod thermostat;
 
 pub use crate::report::StepInfo;
 pub use error::TopologyError;
 pub use forces::ForceField;
-pub use langevin::Langevin;
 pub use options::{Method, Options, SolverChoice};
 #[doc(hidden)]
 pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
@@ -87,3 +87,4 @@ pub use state::ParticleState;
 pub use stencil::Stencil;
 pub use system::{ClusterKernel, ConstraintFamily, ParticleSystem, PotentialFamily};
 pub use table::Table;
+pub use thermostat::Langevin;

@@ -5,9 +5,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::global::Global;
 use super::graph::{self, Numbering};
-use super::langevin::Langevin;
 use super::options::{Method, Options, SolverChoice};
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters};
+use super::thermostat::Langevin;
 use super::{ParticleState, ParticleSystem};
 use crate::error::{SolveError, Stage, StepError};
 use crate::report::StepInfo;
