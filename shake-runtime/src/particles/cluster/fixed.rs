@@ -336,8 +336,6 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             });
         }
         small_apply(MC, &n[..MC * MC], &mut r[..MC]);
-        // p′, for the rare member whose velocity the projection cancels.
-        let before = pl;
         for l in 0..MC {
             axpy_block::<S, NX>(&sl[l], r[l], &gr[l], &mut pl);
         }
@@ -358,6 +356,12 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             }
             let mut rel = relative_dot_after(&gr[j][..wd], &v[..wd], 0.0);
             if !(rel <= HIDDEN_LIMIT) {
+                // p′ = p1 + Gᵀ μ, rebuilt for the rare member whose
+                // velocity the projection cancelled.
+                let mut before = pl;
+                for l in 0..MC {
+                    axpy_block::<S, NX>(&sl[l], -r[l], &gr[l], &mut before);
+                }
                 let mut b0 = 0.0;
                 for t in 0..ar {
                     for k in 0..d {
