@@ -74,13 +74,7 @@ impl Rattle {
         // B, at q1 (whose forces the next step reuses), and p onto the
         // cotangent space (where the last drift left it without a kick).
         if self.has_potential {
-            let q1 = std::mem::take(&mut self.qn);
-            let r = self.forces(&q1, k, time);
-            self.qn = q1;
-            r?;
-            for (p, f) in self.pn.iter_mut().zip(&self.force) {
-                *p -= half * f;
-            }
+            self.closing_kick(k, time)?;
             self.velocity_stage(k, time, report)?;
         }
         report.rattle_iterations = 2 * th.substeps() + usize::from(self.has_potential);

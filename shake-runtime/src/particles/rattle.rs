@@ -471,15 +471,8 @@ impl Rattle {
             }
         }
         self.position_stage(&state.q, state.stamp, continued, 1.0 / h, k, time, report)?;
-        // p′ = p½ − (h/2) ∇V(q1).
         if self.has_potential {
-            let q1 = std::mem::take(&mut self.qn);
-            let r = self.forces(&q1, k, time);
-            self.qn = q1;
-            r?;
-            for (p, f) in self.pn.iter_mut().zip(&self.force) {
-                *p -= half * f;
-            }
+            self.closing_kick(k, time)?;
         }
         if self.options.method == Method::Rattle {
             if !self.fused() {
@@ -487,6 +480,21 @@ impl Rattle {
             }
             // One linear solve with N = G M⁻¹ Gᵀ.
             report.rattle_iterations = 1;
+        }
+        Ok(())
+    }
+
+    /// p′ = p½ − (h/2) ∇V(q1) on (`self.qn`, `self.pn`): the step's last
+    /// kick, with the forces at the new positions, which the next step's
+    /// first kick reuses.
+    pub(super) fn closing_kick(&mut self, k: u64, time: f64) -> Result<(), StepError> {
+        let half = 0.5 * self.h;
+        let q1 = std::mem::take(&mut self.qn);
+        let r = self.forces(&q1, k, time);
+        self.qn = q1;
+        r?;
+        for (p, f) in self.pn.iter_mut().zip(&self.force) {
+            *p -= half * f;
         }
         Ok(())
     }
