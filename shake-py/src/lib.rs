@@ -386,6 +386,7 @@ fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
         | StepError::Shape { .. }
         | StepError::Topology(_)
         | StepError::Solver { .. }
+        | StepError::Unavailable { .. }
         | StepError::Storage { .. } => (InvalidInputError::new_err(msg), nan, nan),
         StepError::NonFinite { t, .. } => (NonFiniteError::new_err(msg), *t, nan),
         StepError::NewtonNotConverged { t, source, .. } | StepError::AtMember { t, source, .. } => {

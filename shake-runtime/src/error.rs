@@ -212,6 +212,16 @@ pub enum StepError {
         /// Why not.
         why: String,
     },
+    /// A quantity was asked of a state that does not have it: the
+    /// constraint forces of a state no RATTLE or SHAKE step of this solver
+    /// made last. Found before any work: it has no step or time.
+    #[error("{what} not available: {why}")]
+    Unavailable {
+        /// What was asked for.
+        what: &'static str,
+        /// Why the state does not have it.
+        why: &'static str,
+    },
     /// A state (the input or one computed) has a NaN or infinite entry.
     #[error("non-finite value in the {what} at step {step}, t = {}: entry {entry} of z = (q, p)", human(*.t))]
     NonFinite {
@@ -395,7 +405,8 @@ impl StepError {
             StepError::InvalidInput { .. }
             | StepError::Shape { .. }
             | StepError::Topology(_)
-            | StepError::Solver { .. } => 0,
+            | StepError::Solver { .. }
+            | StepError::Unavailable { .. } => 0,
             StepError::Storage { step, .. }
             | StepError::NonFinite { step, .. }
             | StepError::NewtonNotConverged { step, .. }
@@ -424,6 +435,7 @@ impl StepError {
             | StepError::Shape { .. }
             | StepError::Topology(_)
             | StepError::Solver { .. }
+            | StepError::Unavailable { .. }
             | StepError::Storage { .. } => None,
             StepError::NonFinite { t, .. }
             | StepError::NewtonNotConverged { t, .. }
@@ -457,6 +469,7 @@ impl StepError {
             | StepError::Shape { .. }
             | StepError::Topology(_)
             | StepError::Solver { .. }
+            | StepError::Unavailable { .. }
             | StepError::Storage { .. } => {}
             StepError::NonFinite { step, t, .. }
             | StepError::NewtonNotConverged { step, t, .. }

@@ -198,6 +198,10 @@ fn every_error_round_trips() {
             solver: "band",
             why: "N's half-bandwidth is 80 (at most 64)".to_string(),
         },
+        StepError::Unavailable {
+            what: "constraint forces",
+            why: "a thermostatted step",
+        },
     ];
     let topology = [
         TopologyError::RowShape {

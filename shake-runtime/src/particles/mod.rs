@@ -75,6 +75,7 @@ pub mod stencils;
 mod system;
 mod table;
 mod thermostat;
+mod virial;
 
 pub use crate::report::StepInfo;
 pub use error::TopologyError;
@@ -88,3 +89,4 @@ pub use stencil::Stencil;
 pub use system::{ClusterKernel, ConstraintFamily, ParticleSystem, PotentialFamily};
 pub use table::Table;
 pub use thermostat::Langevin;
+pub use virial::ConstraintForces;

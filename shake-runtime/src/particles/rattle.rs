@@ -98,6 +98,9 @@ pub struct Rattle {
     pub(super) thermostat: Option<Langevin>,
     /// The drift substeps' start positions (empty without a thermostat).
     pub(super) q0: Vec<f64>,
+    /// The state with this stamp was made by a RATTLE or SHAKE step whose
+    /// multipliers ν are still held, its start positions in `qn`.
+    multipliers_stamp: u64,
 }
 
 impl Rattle {
@@ -183,6 +186,7 @@ impl Rattle {
             step_offset: 0,
             thermostat: None,
             q0: Vec::new(),
+            multipliers_stamp: 0,
             system,
         })
     }
@@ -362,6 +366,24 @@ impl Rattle {
         Ok(self.potential)
     }
 
+    /// The position stage's multipliers ν (one per constraint, in the
+    /// families' order) of the RATTLE or SHAKE step that made `state`, and
+    /// that step's start positions q0; `None` when `state` is not the last
+    /// state this solver made by such a step (a thermostatted step, a
+    /// projection or another step since, a state changed by hand).
+    pub(super) fn last_position_stage(&self, state: &ParticleState) -> Option<(&[f64], &[f64])> {
+        let made = state.stamp != 0 && state.stamp == self.stamp;
+        if !(made && self.multipliers_stamp == state.stamp) {
+            return None;
+        }
+        // The step swapped its buffers: `qn` holds the state it started from.
+        let nu = match &self.path {
+            Path::Clusters { nu, .. } => nu.as_slice(),
+            Path::Global(g) => g.nu.as_slice(),
+        };
+        Some((nu, &self.qn))
+    }
+
     /// A cluster kernel's failure in `stage`, at its family's member.
     fn cluster_error(
         &self,
@@ -433,6 +455,7 @@ impl Rattle {
         self.force_stamp = if self.has_potential { s } else { 0 };
         let projected = self.options.method == Method::Rattle;
         let langevin = self.thermostat.is_some();
+        self.multipliers_stamp = if langevin { 0 } else { s };
         match &mut self.path {
             // RATTLE factorised N(q1): the next step's N(q0).
             Path::Global(g) => g.factor_stamp = if projected { s } else { 0 },

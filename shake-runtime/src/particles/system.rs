@@ -50,6 +50,21 @@ pub trait ConstraintFamily: ClusterKernel + Send + Sync {
         factor: f64,
         out: &mut [f64],
     );
+    /// The forces of multipliers Λ on the particles and their virial:
+    /// `force` ← `force` − factor · G(q)ᵀ Λ and `virial` += Σ_k Σ_a x_a ⊗
+    /// f_{a,k} (D×D, row-major), each member's term taken about its first
+    /// particle, r_a = x_a − x_{k,1}, plus x_{k,1} ⊗ Σ_a f_{a,k}: the same
+    /// sum, without the cancellation of large absolute positions when the
+    /// member's forces balance (every translation-invariant stencil).
+    #[doc(hidden)]
+    fn forces_virial(
+        &self,
+        q: &[f64],
+        lambda: &[f64],
+        factor: f64,
+        force: &mut [f64],
+        virial: &mut [f64],
+    );
     /// out_k ← ∇g_k · M⁻¹ p for every member (gradients in `grad`).
     /// Without `ratio`, before a projection: `before_k` ← |M⁻¹ p|² over
     /// k's particles. With `ratio`, after it: returns max_k |out_k| /
@@ -139,6 +154,63 @@ impl<S: Stencil> Family<S> {
     }
 }
 
+impl<S: Stencil> Family<S> {
+    /// out ← out − factor · W Gᵀ x with the gradients evaluated at `q0`
+    /// (W the inverse masses when given, else I); with `virial`, also
+    /// virial += Σ_k Σ_a x_a ⊗ f_{a,k} of those forces (without W), each
+    /// member's term about its first particle (see
+    /// [`ConstraintFamily::forces_virial`]).
+    #[inline(always)]
+    fn scatter_gradients_at(
+        &self,
+        q0: &[f64],
+        x: &[f64],
+        inv_mass: Option<&[f64]>,
+        factor: f64,
+        out: &mut [f64],
+        mut virial: Option<&mut [f64]>,
+    ) {
+        let (d, ar) = (S::DIM, S::ARITY);
+        let w = ar * d;
+        let idx = self.table.all_particles();
+        let mut xl = [0.0; MAX_LOCAL];
+        let mut gk = [0.0; MAX_LOCAL];
+        let mut fk = [0.0; MAX_LOCAL];
+        for k in 0..self.table.len() {
+            self.gather(q0, k, &mut xl[..w]);
+            self.stencil
+                .gradient(&xl[..w], self.table.data(k), &mut gk[..w]);
+            let xk = x[k] * factor;
+            let ik = &idx[k * ar..(k + 1) * ar];
+            for a in 0..ar {
+                let i = ik[a] as usize;
+                let s = inv_mass.map_or(xk, |m| xk * m[i]);
+                for c in 0..d {
+                    fk[a * d + c] = -s * gk[a * d + c];
+                    out[i * d + c] += fk[a * d + c];
+                }
+            }
+            if let Some(v) = virial.as_deref_mut() {
+                let mut total = [0.0; MAX_LOCAL];
+                for a in 0..ar {
+                    for r in 0..d {
+                        total[r] += fk[a * d + r];
+                        let rel = xl[a * d + r] - xl[r];
+                        for c in 0..d {
+                            v[r * d + c] += rel * fk[a * d + c];
+                        }
+                    }
+                }
+                for r in 0..d {
+                    for c in 0..d {
+                        v[r * d + c] += xl[r] * total[c];
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Largest `ARITY * DIM` a stencil may have: its local coordinates live on
 /// the stack.
 pub(crate) const MAX_LOCAL: usize = 64;
@@ -217,25 +289,18 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         factor: f64,
         out: &mut [f64],
     ) {
-        let (d, ar) = (S::DIM, S::ARITY);
-        let w = ar * d;
-        let idx = self.table.all_particles();
-        let mut xl = [0.0; MAX_LOCAL];
-        let mut gk = [0.0; MAX_LOCAL];
-        for k in 0..self.table.len() {
-            self.gather(q0, k, &mut xl[..w]);
-            self.stencil
-                .gradient(&xl[..w], self.table.data(k), &mut gk[..w]);
-            let xk = x[k] * factor;
-            let ik = &idx[k * ar..(k + 1) * ar];
-            for a in 0..ar {
-                let i = ik[a] as usize;
-                let s = if weighted { xk * inv_mass[i] } else { xk };
-                for c in 0..d {
-                    out[i * d + c] -= s * gk[a * d + c];
-                }
-            }
-        }
+        let w = weighted.then_some(inv_mass);
+        self.scatter_gradients_at(q0, x, w, factor, out, None);
+    }
+    fn forces_virial(
+        &self,
+        q: &[f64],
+        lambda: &[f64],
+        factor: f64,
+        force: &mut [f64],
+        virial: &mut [f64],
+    ) {
+        self.scatter_gradients_at(q, lambda, None, factor, force, Some(virial));
     }
     fn hidden(
         &self,

@@ -106,6 +106,7 @@ impl Rejection {
             | StepError::Shape { .. }
             | StepError::Topology(_)
             | StepError::Solver { .. }
+            | StepError::Unavailable { .. }
             | StepError::Storage { .. } => Rejection::NonFinite,
         }
     }

@@ -43,6 +43,11 @@ pub(super) fn pack_error(e: Option<&StepError>, w: &mut Vec<u64>) {
             pack_str(solver, w);
             pack_str(why, w);
         }
+        StepError::Unavailable { what, why } => {
+            w.push(16);
+            pack_str(what, w);
+            pack_str(why, w);
+        }
         StepError::Topology(ref e) => {
             w.push(15);
             pack_topology(e, w);
@@ -230,6 +235,10 @@ fn unpack_error_in(r: &mut Reader, in_cause: bool) -> Result<Option<StepError>, 
             why: r.text()?,
         },
         15 => StepError::Topology(unpack_topology(r)?),
+        16 => StepError::Unavailable {
+            what: r.string()?,
+            why: r.string()?,
+        },
         11 => StepError::Storage {
             step: r.word()?,
             states: r.word()?,
