@@ -46,6 +46,7 @@ mod particles_langevin;
 mod particles_paths;
 mod particles_result_scale;
 mod particles_review;
+mod particles_rings;
 mod particles_virial;
 mod perf_alloc;
 mod perf_derivatives;
