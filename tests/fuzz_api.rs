@@ -410,6 +410,7 @@ fn kind(e: &StepError) -> &'static str {
         StepError::Shape { .. } => "Shape",
         StepError::Topology(_) => "Topology",
         StepError::Solver { .. } => "Solver",
+        StepError::Unavailable { .. } => "Unavailable",
         StepError::AtMember { .. } => "AtMember",
         StepError::Storage { .. } => "Storage",
         StepError::NonFinite { .. } => "NonFinite",
