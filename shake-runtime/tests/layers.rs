@@ -45,7 +45,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("particles/global", 3),
     ("guard", 4), ("particles/options", 4), ("particles/thermostat", 4),
     ("step", 5), ("particles/rattle", 5), ("particles/langevin", 5),
-    ("particles/virial", 5),
+    ("particles/virial", 5), ("particles/adjust", 5),
     ("run", 6), ("trajectory", 6), ("particles/run", 6),
     ("integrator", 7), ("initial_data", 7), ("keep_positions", 7), ("validate", 7),
     ("particles", 7), ("particles/generate", 7), ("ensemble", 7), ("ensemble_store", 7),

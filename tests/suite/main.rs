@@ -38,6 +38,7 @@ mod order_compositions;
 mod packed_jacobian;
 mod paper_claims;
 mod paper_hopf;
+mod particles_adjust;
 mod particles_alloc;
 mod particles_driver;
 mod particles_errors;

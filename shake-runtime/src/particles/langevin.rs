@@ -75,7 +75,7 @@ impl Rattle {
         // cotangent space (where the last drift left it without a kick).
         if self.has_potential {
             self.closing_kick(k, time)?;
-            self.velocity_stage(k, time, report)?;
+            self.velocity_stage(true, k, time, report)?;
         }
         report.rattle_iterations = 2 * th.substeps() + usize::from(self.has_potential);
         Ok(())
@@ -105,7 +105,7 @@ impl Rattle {
             result = self.position_stage(&q0, 0, false, 1.0 / delta, k, time, &mut sub);
             // (Without a potential the position stage did it.)
             if result.is_ok() && !self.fused() {
-                result = self.velocity_stage(k, time, &mut sub);
+                result = self.velocity_stage(true, k, time, &mut sub);
             }
             report.hidden = sub.hidden;
             report.shake_iterations = report.shake_iterations.max(sub.shake_iterations);

@@ -58,6 +58,7 @@
 //!
 //! Design, tolerances and measured costs: `docs/scale.md`.
 
+mod adjust;
 mod cluster;
 mod error;
 mod forces;

@@ -15,7 +15,7 @@ use crate::solver::SpdSolver;
 
 /// What a particle step reports before its stages fill it in: the fields
 /// its kernels do not gather are NaN (see [`StepInfo`]).
-fn particle_report() -> StepInfo {
+pub(super) fn particle_report() -> StepInfo {
     StepInfo {
         lambda: f64::NAN,
         condition: f64::NAN,
@@ -79,7 +79,9 @@ pub struct Rattle {
     /// state with this stamp.
     force_stamp: u64,
     potential: f64,
-    stamp: u64,
+    /// The last state this solver made (0: none). Every call that
+    /// overwrites the caches clears it first.
+    pub(super) stamp: u64,
     /// In a run on the driver: the start time t0 and the stamp of the
     /// state the last step made (the driver holds that state's buffers).
     pub(super) run_t0: f64,
@@ -284,17 +286,25 @@ impl Rattle {
     }
 
     pub(super) fn check_shape(&self, q: &[f64], p: &[f64]) -> Result<(), StepError> {
-        let d = self.qn.len();
-        for (what, got) in [("q", q.len()), ("p", p.len())] {
-            if got != d {
-                return Err(StepError::Shape {
-                    what,
-                    got,
-                    expected: d,
-                });
-            }
+        self.check_lengths([("q", q.len()), ("p", p.len())])
+    }
+
+    /// `Ok` when every array, given by name and length, has the system's
+    /// n·D entries, else [`StepError::Shape`] naming the first that does
+    /// not.
+    pub(super) fn check_lengths<const K: usize>(
+        &self,
+        arrays: [(&'static str, usize); K],
+    ) -> Result<(), StepError> {
+        let expected = self.qn.len();
+        match arrays.into_iter().find(|&(_, got)| got != expected) {
+            Some((what, got)) => Err(StepError::Shape {
+                what,
+                got,
+                expected,
+            }),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// `Ok` when every entry of `v` is finite, else [`StepError::NonFinite`]
@@ -499,7 +509,7 @@ impl Rattle {
         }
         if self.options.method == Method::Rattle {
             if !self.fused() {
-                self.velocity_stage(k, time, report)?;
+                self.velocity_stage(true, k, time, report)?;
             }
             // One linear solve with N = G M⁻¹ Gᵀ.
             report.rattle_iterations = 1;
@@ -539,7 +549,7 @@ impl Rattle {
         self.pn.copy_from_slice(&state.p);
         let mut report = particle_report();
         self.position_stage(&state.q, 0, false, 0.0, k, time, &mut report)?;
-        self.velocity_stage(k, time, &mut report)?;
+        self.velocity_stage(true, k, time, &mut report)?;
         report.rattle_iterations = 1;
         std::mem::swap(&mut state.q, &mut self.qn);
         std::mem::swap(&mut state.p, &mut self.pn);
@@ -625,9 +635,14 @@ impl Rattle {
         }
     }
 
-    /// pn ← pn − G(qn)ᵀ μ with G(qn) M⁻¹ pn = 0.
+    /// pn ← pn − G(qn)ᵀ μ with G(qn) M⁻¹ pn = 0. With
+    /// `after_position_stage` (qn was just solved for by a position stage)
+    /// the coupled path also confirms g(qn) at qn's own scale, from the
+    /// gradients it evaluates there anyway; momenta projected at positions
+    /// someone else made are projected wherever those positions are.
     pub(super) fn velocity_stage(
         &mut self,
+        after_position_stage: bool,
         k: u64,
         time: f64,
         report: &mut StepInfo,
@@ -654,7 +669,7 @@ impl Rattle {
                 &self.num,
                 &self.qn,
                 &mut self.pn,
-                self.options.tol,
+                after_position_stage.then_some(self.options.tol),
                 k,
                 time,
                 report,
