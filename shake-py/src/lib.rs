@@ -4,6 +4,7 @@
 //! arrays out and every failure a Python exception that carries the partial
 //! trajectory.
 
+mod bonds;
 mod models;
 
 use geoshake::declared::{DeclareError, DeclaredSystem};
@@ -378,6 +379,20 @@ impl Arrays {
 
 /// The Python exception for a run's error, with the partial run attached.
 fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
+    let err = typed_error(py, e);
+    let v = err.value(py);
+    let r = partial.into_py(py);
+    let _ = v.setattr("trajectory", r.trajectory);
+    let _ = v.setattr("times", r.times);
+    let _ = v.setattr("steps", r.steps);
+    let _ = v.setattr("lambda_", r.lambda_);
+    let _ = v.setattr("sigma", r.sigma);
+    err
+}
+
+/// The subclass of `ShakeError` for a `StepError`, carrying `step`, `time`
+/// and `residual` (NaN where the error has none).
+fn typed_error(py: Python<'_>, e: &StepError) -> PyErr {
     let msg = e.to_string();
     let nan = f64::NAN;
     let (err, time, residual) = match e {
@@ -409,15 +424,9 @@ fn step_error(py: Python<'_>, e: &StepError, partial: Arrays) -> PyErr {
         _ => (ShakeError::new_err(msg), nan, nan),
     };
     let v = err.value(py);
-    let r = partial.into_py(py);
     let _ = v.setattr("step", e.step());
     let _ = v.setattr("time", time);
     let _ = v.setattr("residual", residual);
-    let _ = v.setattr("trajectory", r.trajectory);
-    let _ = v.setattr("times", r.times);
-    let _ = v.setattr("steps", r.steps);
-    let _ = v.setattr("lambda_", r.lambda_);
-    let _ = v.setattr("sigma", r.sigma);
     err
 }
 
@@ -743,6 +752,7 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<System>()?;
     m.add_class::<Result_>()?;
+    m.add_class::<bonds::Bonds>()?;
     m.add_function(wrap_pyfunction!(declare, m)?)?;
     m.add_function(wrap_pyfunction!(model, m)?)?;
     m.add_function(wrap_pyfunction!(model_names, m)?)?;

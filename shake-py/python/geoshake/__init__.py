@@ -24,6 +24,7 @@ carries ``step``, ``time``, ``residual`` and the partial trajectory.
 """
 
 from ._geoshake import (
+    Bonds,
     ComponentJumpError,
     DeclarationError,
     FibreJumpError,
@@ -43,6 +44,7 @@ from ._geoshake import (
 from . import models
 
 __all__ = [
+    "Bonds",
     "ComponentJumpError",
     "DeclarationError",
     "FibreJumpError",

@@ -1,4 +1,5 @@
 from ._geoshake import (
+    Bonds as Bonds,
     ComponentJumpError as ComponentJumpError,
     DeclarationError as DeclarationError,
     FibreJumpError as FibreJumpError,
