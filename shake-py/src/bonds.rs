@@ -8,7 +8,7 @@ use std::sync::Mutex;
 use geoshake::runtime::particles::{
     stencils::Distance, Options, ParticleSystem, Rattle, Table, TopologyError,
 };
-use geoshake::StepError;
+use geoshake::{StepError, StepInfo};
 use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
@@ -174,17 +174,8 @@ impl Bonds {
         q0: &Bound<'_, PyAny>,
         x: &Bound<'_, PyAny>,
     ) -> PyResult<f64> {
-        let q0 = positions(q0, "q0", self.atoms)?;
-        let mut x = in_place(x, "x", self.atoms)?;
-        let q0 = q0.as_slice().expect("C-contiguous");
-        let x = x.as_slice_mut().expect("C-contiguous");
-        let mut guard = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
-        let rattle: &mut Rattle = &mut guard;
-        let r = py.detach(|| rattle.shake_positions(q0, x));
-        match r {
-            Ok(info) => Ok(info.residual.unwrap_or(f64::NAN)),
-            Err(e) => Err(error(py, &e)),
-        }
+        let info = self.solve(py, ("q0", q0), ("x", x), Rattle::shake_positions)?;
+        Ok(info.residual.unwrap_or(f64::NAN))
     }
 
     /// RATTLE's velocity stage: `p` (momenta, or forces) becomes
@@ -197,17 +188,8 @@ impl Bonds {
         q: &Bound<'_, PyAny>,
         p: &Bound<'_, PyAny>,
     ) -> PyResult<f64> {
-        let q = positions(q, "q", self.atoms)?;
-        let mut p = in_place(p, "p", self.atoms)?;
-        let q = q.as_slice().expect("C-contiguous");
-        let p = p.as_slice_mut().expect("C-contiguous");
-        let mut guard = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
-        let rattle: &mut Rattle = &mut guard;
-        let r = py.detach(|| rattle.project_momenta(q, p));
-        match r {
-            Ok(info) => Ok(info.hidden.unwrap_or(f64::NAN)),
-            Err(e) => Err(error(py, &e)),
-        }
+        let info = self.solve(py, ("q", q), ("p", p), Rattle::project_momenta)?;
+        Ok(info.hidden.unwrap_or(f64::NAN))
     }
 
     /// n, the number of atoms.
@@ -238,6 +220,29 @@ impl Bonds {
             self.atoms,
             self.solver()
         )
+    }
+}
+
+/// `Rattle::shake_positions` or `Rattle::project_momenta`.
+type Stage = fn(&mut Rattle, &[f64], &mut [f64]) -> Result<StepInfo, StepError>;
+
+impl Bonds {
+    /// `stage(rattle, read, written)` on the two arrays, without the GIL.
+    fn solve(
+        &self,
+        py: Python<'_>,
+        (read_name, read): (&str, &Bound<'_, PyAny>),
+        (written_name, written): (&str, &Bound<'_, PyAny>),
+        stage: Stage,
+    ) -> PyResult<StepInfo> {
+        let read = positions(read, read_name, self.atoms)?;
+        let mut written = in_place(written, written_name, self.atoms)?;
+        let read = read.as_slice().expect("C-contiguous");
+        let written = written.as_slice_mut().expect("C-contiguous");
+        let mut guard = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
+        let rattle: &mut Rattle = &mut guard;
+        py.detach(|| stage(rattle, read, written))
+            .map_err(|e| error(py, &e))
     }
 }
 
