@@ -94,6 +94,9 @@ pub struct Spce {
     x: Vec<[f64; 3]>,
     wrapped: Vec<([f64; 3], usize)>,
     f: Vec<[f64; 3]>,
+    /// Σ_pairs 2 tr ∇²φ of the last call, kcal/mol/Å² (see
+    /// [`translational_terms`](Spce::translational_terms)).
+    laplacian: f64,
 }
 
 impl Spce {
@@ -131,6 +134,7 @@ impl Spce {
             x: Vec::new(),
             wrapped: Vec::new(),
             f: Vec::new(),
+            laplacian: 0.0,
         })
     }
 
@@ -157,13 +161,51 @@ impl Spce {
         self.compute(q, f, 1.0, false)
     }
 
-    /// V and −∇V, both times `scale`, the forces added into `f`.
+    /// The two sums of the translational configurational temperature at q,
+    /// in kcal/mol/Å units: Σ_i |F_i|² over the molecules, F_i the total
+    /// force on molecule i (kcal²/mol²/Å²), and Σ_i ∇²_{R_i} V, the
+    /// Laplacian of V in molecule i's centre of mass moved rigidly
+    /// (kcal/mol/Å²).
+    ///
+    /// Why they estimate the temperature: rigid molecules' configurations
+    /// are their centres R_i and orientations, and the measure constrained
+    /// dynamics samples at temperature T (the Boltzmann factor e^{−V/k_B T}
+    /// times M's surface measure, whose density det(G M⁻¹ Gᵀ)^{1/2} is
+    /// constant for rigid molecules) is flat in each R_i. Integrating by
+    /// parts in R_i (V periodic, so no boundary term):
+    ///
+    ///   ⟨|∇_{R_i} V|²⟩ = k_B T ⟨∇²_{R_i} V⟩,  ∇_{R_i} V = −F_i,
+    ///
+    /// so k_B T = ⟨Σ_i |F_i|²⟩ / ⟨Σ_i ∇²_{R_i} V⟩ (Jepps, Ayton and Evans,
+    /// Phys. Rev. E 62, 4757 (2000), with the vector field B = ∇_R V). For
+    /// pair terms φ_ab(|x_a − x_b|) between molecules, moving i rigidly
+    /// moves each of its atoms by the same vector, so ∇²_{R_i} V =
+    /// Σ_{a∈i} Σ_{b∉i} tr ∇²φ_ab and Σ_i ∇²_{R_i} V = 2 Σ_pairs (φ″ + 2φ′/r).
+    /// The identity needs V ∈ C¹ with φ″ piecewise continuous: the
+    /// shifted-force cut-off is exactly that (φ′(r_c) = 0, φ″ jumps).
+    #[allow(dead_code)]
+    pub fn translational_terms(&mut self, q: &[f64]) -> (f64, f64) {
+        let mut f = vec![0.0; q.len()];
+        self.energy_forces(q, &mut f);
+        let force_squared = f
+            .chunks_exact(9)
+            .map(|m| {
+                let s = [0, 1, 2].map(|c| m[c] + m[3 + c] + m[6 + c]);
+                dot(s, s)
+            })
+            .sum();
+        (force_squared, self.laplacian)
+    }
+
+    /// V and −∇V, both times `scale`, the forces added into `f`; Σ_pairs
+    /// 2 tr ∇²φ (unscaled) into `self.laplacian`.
     fn compute(&mut self, q: &[f64], f: &mut [f64], scale: f64, cells: bool) -> f64 {
         assert!(
             q.len().is_multiple_of(9) && f.len() == q.len(),
             "q and f hold 3 coordinates of 3 atoms per molecule"
         );
         let n = q.len() / 3;
+        self.laplacian = 0.0;
         let v = if cells {
             self.sort_into_cells(q);
             self.cell_pairs()
@@ -303,9 +345,10 @@ impl Spce {
 
     /// The pair (i, j) of the sorted arrays at separation d = x_i − x_j,
     /// r² = |d|² < r_c²: its energy, with its forces added into `f[i]` and
-    /// `f[j]`. Zero within a molecule.
+    /// `f[j]` and 2 tr ∇²φ = 2 (φ″ + 2φ′/r) into `self.laplacian`. Zero
+    /// within a molecule.
     #[inline]
-    fn pair(&self, i: usize, j: usize, d: [f64; 3], r2: f64, f: &mut [[f64; 3]]) -> f64 {
+    fn pair(&mut self, i: usize, j: usize, d: [f64; 3], r2: f64, f: &mut [[f64; 3]]) -> f64 {
         let (a, b) = (self.atom[i], self.atom[j]);
         if a / 3 == b / 3 {
             return 0.0;
@@ -318,13 +361,21 @@ impl Spce {
         // V and −V′(r)/r, the factor of d in the force on i.
         let mut v = kqq * (inv_r - inv_rc + (r - rc) * inv_rc * inv_rc);
         let mut s = kqq * (inv_r2 - inv_rc * inv_rc) * inv_r;
+        // Coulomb's tr ∇²φ: φ″ = 2k q_i q_j/r³ and 2φ′/r = 2k q_i q_j
+        // (−1/r³ + 1/(r r_c²)), the 1/r³ cancelling (1/r is harmonic).
+        let mut trace = 2.0 * kqq * inv_r * inv_rc * inv_rc;
         if a % 3 == 0 && b % 3 == 0 {
             let sr2 = SIGMA * SIGMA * inv_r2;
             let sr6 = sr2 * sr2 * sr2;
             v += 4.0 * EPSILON * (sr6 * sr6 - sr6) - self.lj_at_cut
                 + (r - rc) * self.lj_force_at_cut;
-            s += (24.0 * EPSILON * (2.0 * sr6 * sr6 - sr6) * inv_r - self.lj_force_at_cut) * inv_r;
+            let lj_s =
+                (24.0 * EPSILON * (2.0 * sr6 * sr6 - sr6) * inv_r - self.lj_force_at_cut) * inv_r;
+            s += lj_s;
+            // φ″ = u″ = 4ε(156 (σ/r)¹² − 42 (σ/r)⁶)/r², and 2φ′/r = −2s.
+            trace += 4.0 * EPSILON * (156.0 * sr6 * sr6 - 42.0 * sr6) * inv_r2 - 2.0 * lj_s;
         }
+        self.laplacian += 2.0 * trace;
         for c in 0..3 {
             f[i][c] += s * d[c];
             f[j][c] -= s * d[c];
