@@ -98,14 +98,18 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
                 &mut self.steps.map.ws,
                 tol,
             )?;
-            let nd = check_nondegeneracy(&self.system, q, p, &mut self.steps.map.ws);
-            if nd.inverse_norm.is_infinite() {
-                return Err(StepError::SingularNondegeneracyMatrix {
-                    stage: Stage::Rattle,
-                    step: 0,
-                    t: 0.0,
-                });
-            }
+            let ws = &mut self.steps.map.ws;
+            let nd = check_nondegeneracy(&self.system, q, p, ws);
+            self.guard.nondegenerate_at_start(
+                &self.system,
+                q,
+                p,
+                ws,
+                &nd,
+                Stage::Rattle,
+                0,
+                0.0,
+            )?;
         }
         Ok(out)
     }

@@ -162,6 +162,85 @@ pub(crate) fn hidden_roundoff<S: ConstrainedSystem>(sys: &S, z: &[f64], grad: &m
     1e-12 * (1.0 + zmax) * (1.0 + zmax + norm_inf(grad))
 }
 
+/// The largest (m + 1)(2d)² for which [`nondegeneracy_terms`] is
+/// evaluated: about a million multiply-adds, once per starting state. Past
+/// it (large dense systems) N is judged by its condition alone.
+const TERMS_BUDGET: usize = 1 << 20;
+
+/// ‖T‖₁, where T_ij is the sum of the absolute values of the terms of
+/// N_ij = ∇{g_i,H} · J∇g_j (Section 5.2), with
+/// ∇{g_i,H} = ∇²g_i J∇H − ∇²H J∇g_i:
+///
+///   T_ij = Σ_k (Σ_l |∇²g_i|_kl |J∇H|_l + |∇²H|_kl |J∇g_i|_l) |J∇g_j|_k.
+///
+/// Rounding the data of N in their last bit moves N_ij by about ε T_ij, so
+/// an N whose entries are small against T is round-off: a degeneracy that
+/// holds identically (such as N ≡ 0 for an angular momentum under any
+/// radial potential) evaluates to numbers of size ε‖T‖, not to 0, and only
+/// this scale tells them from a genuine small N. NaN when the system is too
+/// large for the budget or a derivative is not finite. Allocates its
+/// scratch (in `ws.terms`) on first use.
+pub(crate) fn nondegeneracy_terms<S: ConstrainedSystem>(
+    sys: &S,
+    q: &[f64],
+    p: &[f64],
+    ws: &mut Workspace,
+) -> f64 {
+    let (d, m) = (ws.d, ws.m);
+    let n = 2 * d;
+    if m == 0 || (m + 1).saturating_mul(n.saturating_mul(n)) > TERMS_BUDGET {
+        return f64::NAN;
+    }
+    ws.terms.resize(2 * n * n + 2 * n + 2 * m * n + m, 0.0);
+    let (hess_h, rest) = ws.terms.split_at_mut(n * n);
+    let (hess_g, rest) = rest.split_at_mut(n * n);
+    let (grad, rest) = rest.split_at_mut(n);
+    let (jh, rest) = rest.split_at_mut(n);
+    let (g_z, rest) = rest.split_at_mut(m * n);
+    let (a, unit) = rest.split_at_mut(m * n);
+    // |J v|_k = |v_{k ± d}|: J swaps the halves of z (and signs, which the
+    // absolute values drop).
+    let swap = |k: usize| if k < d { k + d } else { k - d };
+    hess_h.fill(0.0);
+    sys.hessian(q, p, hess_h);
+    let (hq, hp) = grad.split_at_mut(d);
+    sys.gradient(q, p, hq, hp);
+    g_z.fill(0.0);
+    sys.constraint_jacobian(q, p, g_z);
+    for k in 0..n {
+        jh[k] = grad[swap(k)].abs();
+    }
+    for i in 0..m {
+        unit.fill(0.0);
+        unit[i] = 1.0;
+        hess_g.fill(0.0);
+        sys.constraint_hessian(q, p, unit, hess_g);
+        for k in 0..n {
+            let mut sum = 0.0;
+            for l in 0..n {
+                sum += hess_g[k + l * n].abs() * jh[l]
+                    + hess_h[k + l * n].abs() * g_z[i + swap(l) * m].abs();
+            }
+            a[i + k * m] = sum;
+        }
+    }
+    let mut norm = 0.0f64;
+    for j in 0..m {
+        let mut column = 0.0;
+        for i in 0..m {
+            for k in 0..n {
+                column += a[i + k * m] * g_z[j + swap(k) * m].abs();
+            }
+        }
+        norm = norm.max(column);
+    }
+    if norm.is_finite() {
+        norm
+    } else {
+        f64::NAN
+    }
+}
+
 /// Whether g(q, p) is at its round-off: every |g_i| ≤ 64 ε Σ_k
 /// |∂g_i/∂z_k| |z_k|, what rounding each entry of z in its last bit
 /// changes g_i by, with room (64) for the roundings of the projection and

@@ -52,6 +52,7 @@ mod particles_virial;
 mod perf_alloc;
 mod perf_derivatives;
 mod reference_selftest;
+mod roundoff_nondegeneracy;
 mod run_lane;
 mod runtime_alloc;
 mod runtime_convergence;

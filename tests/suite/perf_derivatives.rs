@@ -7,7 +7,8 @@
 //!   (the classical SHAKE): gradients, g, G = g_z (at most three times a
 //!   step: at the start and for SHAKE's Jacobian), the closed-form fibre
 //!   flow and N (the nondegeneracy check) only — no Hessian of H, no
-//!   Σλ∇²g, no hidden constraint or its Jacobian.
+//!   Σλ∇²g, no hidden constraint or its Jacobian — but for the one check
+//!   of the first input's N against the size of its terms.
 //! - RATTLE adds {g, H} (its projection).
 //! - Nobody ever evaluates the Jacobian of the hidden constraints.
 //!
@@ -218,18 +219,23 @@ fn the_classical_shake_evaluates_no_second_derivative_and_no_jacobian() {
     let p = Pendulum::new(1.0, 1.0);
     let c = Chain8::new(1.0, 1.0);
     // [h, grad, hessian, g, g_z, g_hess, hidden, hidden_z, n, fibre]
-    for (name, row) in [
+    for (name, m, row) in [
         (
             "pendulum",
+            1,
             counts("pendulum", p, StormerVerlet, false, &pendulum),
         ),
         (
             "chain of 8",
+            8,
             counts("chain of 8", c, StormerVerlet, false, &chain),
         ),
     ] {
+        // The first call checks its input's N against the size of N's
+        // terms (`rattle::nondegeneracy_terms`): one H_zz and m Σλ∇²g, at
+        // the start only, never inside a step.
         assert_eq!(
-            row[2], 0,
+            row[2], 1,
             "{name}: Hessian of H evaluated by classical SHAKE"
         );
         // g_z at the start of a step and at the iterate where the
@@ -240,7 +246,7 @@ fn the_classical_shake_evaluates_no_second_derivative_and_no_jacobian() {
             "{name}: g_z evaluated {} times by classical SHAKE",
             row[4]
         );
-        assert_eq!(row[5], 0, "{name}: Σλ∇²g evaluated by classical SHAKE");
+        assert_eq!(row[5], m, "{name}: Σλ∇²g evaluated by classical SHAKE");
         assert_eq!(row[6], 0, "{name}: {{g,H}} evaluated by SHAKE");
         assert_eq!(row[7], 0, "{name}: ∇{{g,H}} evaluated");
         // N once per step, at its result: the input of each call but the
@@ -249,17 +255,19 @@ fn the_classical_shake_evaluates_no_second_derivative_and_no_jacobian() {
         assert_eq!(row[8] as u64, STEPS + 1, "{name}: N evaluations");
         assert!(row[9] > 0, "{name}: the closed-form fibre flow is used");
     }
-    for (name, row) in [
+    for (name, m, row) in [
         (
             "pendulum",
+            1,
             counts("pendulum", p, StormerVerlet, true, &pendulum),
         ),
         (
             "chain of 8",
+            8,
             counts("chain of 8", c, StormerVerlet, true, &chain),
         ),
     ] {
-        assert_eq!(row[2] + row[5] + row[7], 0, "{name}: RATTLE, SV");
+        assert_eq!((row[2], row[5], row[7]), (1, m, 0), "{name}: RATTLE, SV");
         assert!(
             row[4] as u64 <= 3 * STEPS,
             "{name}: RATTLE, SV: g_z {}",

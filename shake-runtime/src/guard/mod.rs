@@ -27,7 +27,8 @@ use crate::error::{SolveError, Stage, StepError};
 use crate::linalg::all_finite;
 use crate::newton::NewtonOptions;
 use crate::rattle::{
-    check_nondegeneracy, factor_and_check, read_n, FactorN, NondegeneracyCheck, ProjectionReport,
+    check_nondegeneracy, factor_and_check, nondegeneracy_terms, read_n, FactorN,
+    NondegeneracyCheck, ProjectionReport,
 };
 use crate::report::StepInfo;
 use crate::shake::{ShakeReport, Workspace};
@@ -113,7 +114,7 @@ impl Guard {
         self.n_prev_valid = true;
         self.inverse_prev = nd.inverse_norm;
         self.estimated = nd.inverse_norm;
-        self.nondegenerate(&nd, 0.0, Stage::Shake, step, t)?;
+        self.nondegenerate_at_start(sys, q, p, ws, &nd, Stage::Shake, step, t)?;
         self.reference_norm = nd.norm;
         self.det_prev = nd.det;
         Ok(())
@@ -433,6 +434,34 @@ impl Guard {
             self.component(&nd, step, t)?;
         }
         Ok(())
+    }
+
+    /// N at a starting state (of a run, or a projection's result): invertible
+    /// and, besides its condition, large against the size of its terms
+    /// (`nondegeneracy_terms`, ‖T‖₁ ≥ ‖N‖₁): ‖T‖₁ ‖N⁻¹‖₁ within the
+    /// condition limit, else [`StepError::NondegeneracyLost`]. The
+    /// condition alone cannot see an N that is round-off everywhere (for
+    /// m = 1 it is always 1); this is the run-time half of Section 5.2's
+    /// nondegeneracy check, whose compile-time half refuses the systems
+    /// where N vanishes identically. Along a run N is then compared with
+    /// its value here.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn nondegenerate_at_start<S: ConstrainedSystem>(
+        &self,
+        sys: &S,
+        q: &[f64],
+        p: &[f64],
+        ws: &mut Workspace,
+        nd: &NondegeneracyCheck,
+        stage: Stage,
+        step: u64,
+        t: f64,
+    ) -> Result<f64, StepError> {
+        if nd.inverse_norm.is_infinite() {
+            return self.nondegenerate(nd, 0.0, stage, step, t);
+        }
+        let terms = nondegeneracy_terms(sys, q, p, ws);
+        self.nondegenerate(nd, if terms.is_nan() { 0.0 } else { terms }, stage, step, t)
     }
 
     /// N is invertible (else [`StepError::SingularNondegeneracyMatrix`]) and

@@ -70,6 +70,9 @@ pub(crate) struct Workspace {
     pub(crate) polish_keep: Vec<f64>,
     /// Which half of z each g_i reads (`tolerance::reads`).
     pub(crate) g_reads: Vec<u8>,
+    /// Scratch of `rattle::nondegeneracy_terms`, sized on its first use
+    /// (starting states only, never inside a step).
+    pub(crate) terms: Vec<f64>,
 }
 
 /// N = {{H,g_i},g_j} at the state being checked, at the previous one, and
@@ -173,6 +176,7 @@ impl Workspace {
             g_size: vec![0.0; m],
             polish_keep: vec![0.0; 2 * m + 2 * n],
             g_reads: crate::tolerance::reads(sys.jacobian_pattern(), d, m),
+            terms: Vec::new(),
         }
     }
 }
