@@ -51,7 +51,7 @@ use geoshake::runtime::particles::generate::{self, KB, MVV2E};
 use geoshake::runtime::particles::{Langevin, Options, ParticleState, Rattle};
 
 mod spce;
-use spce::Spce;
+use spce::{configurational_temperature, Spce};
 
 /// Steps between two samples of H (the points of the drift's fit).
 const SAMPLE: u64 = 10;
@@ -86,31 +86,6 @@ fn linear_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
         .map(|(x, y)| (y - my - b * (x - mx)).powi(2))
         .sum();
     (b, (rss / n).sqrt())
-}
-
-/// The temperature ⟨Σ|F_i|²⟩ / (k_B ⟨Σ∇²V⟩) of the samples (K), and its
-/// standard error from the spread of the same ratio over 10 consecutive
-/// batches (NaN with fewer than 20 samples): batches much longer than the
-/// samples' correlation time are nearly independent.
-fn configurational_temperature(samples: &[(f64, f64)]) -> (f64, f64) {
-    let ratio = |s: &[(f64, f64)]| {
-        let (f2, lap) = s
-            .iter()
-            .fold((0.0, 0.0), |(a, b), &(f2, lap)| (a + f2, b + lap));
-        f2 / lap / KB
-    };
-    let t = ratio(samples);
-    if samples.len() < 20 {
-        return (t, f64::NAN);
-    }
-    let batches: Vec<f64> = samples
-        .chunks(samples.len() / 10)
-        .take(10)
-        .map(ratio)
-        .collect();
-    let mean = batches.iter().sum::<f64>() / 10.0;
-    let var = batches.iter().map(|b| (b - mean).powi(2)).sum::<f64>() / 9.0;
-    (t, (var / 10.0).sqrt())
 }
 
 fn fail(what: &str) -> ! {

@@ -39,7 +39,7 @@
 //! field loops over all pairs instead. Rebuilding costs O(n), a small part
 //! of the pair loop, and needs no skin or displacement check.
 
-use geoshake::runtime::particles::generate::MVV2E;
+use geoshake::runtime::particles::generate::{KB, MVV2E};
 use geoshake::runtime::particles::ForceField;
 
 /// Coulomb's constant k = 1/(4π ε₀) in kcal·Å/(mol·e²) (LAMMPS `real`).
@@ -382,6 +382,34 @@ impl Spce {
         }
         v
     }
+}
+
+/// The temperature ⟨Σ|F_i|²⟩ / (k_B ⟨Σ∇²V⟩) of samples of
+/// [`Spce::translational_terms`] (K), and its standard error from the
+/// spread of the same ratio over 10 consecutive batches (NaN with fewer
+/// than 20 samples): batches much longer than the samples' correlation time
+/// are nearly independent, so the 10 batch ratios scatter like 10
+/// independent draws.
+#[allow(dead_code)]
+pub fn configurational_temperature(samples: &[(f64, f64)]) -> (f64, f64) {
+    let ratio = |s: &[(f64, f64)]| {
+        let (f2, lap) = s
+            .iter()
+            .fold((0.0, 0.0), |(a, b), &(f2, lap)| (a + f2, b + lap));
+        f2 / lap / KB
+    };
+    let t = ratio(samples);
+    if samples.len() < 20 {
+        return (t, f64::NAN);
+    }
+    let batches: Vec<f64> = samples
+        .chunks(samples.len() / 10)
+        .take(10)
+        .map(ratio)
+        .collect();
+    let mean = batches.iter().sum::<f64>() / 10.0;
+    let var = batches.iter().map(|b| (b - mean).powi(2)).sum::<f64>() / 9.0;
+    (t, (var / 10.0).sqrt())
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

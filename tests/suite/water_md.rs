@@ -299,16 +299,7 @@ fn langevin_water_has_the_configurational_temperature_of_its_thermostat() {
         assert!(rattle.run_in_place(&mut state, 10).error.is_none());
         samples.push(probe.translational_terms(state.q()));
     }
-    let ratio = |s: &[(f64, f64)]| {
-        let (f2, lap) = s
-            .iter()
-            .fold((0.0, 0.0), |(a, b), (f2, lap)| (a + f2, b + lap));
-        f2 / lap / KB
-    };
-    let t = ratio(&samples);
-    let batches: Vec<f64> = samples.chunks(20).map(ratio).collect();
-    let mean = batches.iter().sum::<f64>() / 10.0;
-    let se = (batches.iter().map(|b| (b - mean).powi(2)).sum::<f64>() / 90.0).sqrt();
+    let (t, se) = spce::configurational_temperature(&samples);
     assert!(
         (t - KELVIN).abs() < 4.0 * se + 0.01 * KELVIN,
         "configurational temperature {t:.2} K ± {se:.2} K (target {KELVIN} K)"
