@@ -8,11 +8,18 @@ use std::path::Path;
 /// Appends `x` in its shortest decimal form that parses back to the same
 /// f64 (Rust's `{}` and `{:e}` both are): plain for 10⁻⁴ ≤ |x| < 10¹⁵ and
 /// for 0, scientific otherwise, so that no number runs to hundreds of
-/// digits. C's strtod, Python's float and NumPy read both forms.
+/// digits, and an integral value as `20.0`. C's strtod, Python's float
+/// and NumPy read every form.
 pub(crate) fn push_f64(out: &mut String, x: f64) {
     let a = x.abs();
     if a == 0.0 || (1e-4..1e15).contains(&a) || !x.is_finite() {
+        let start = out.len();
         let _ = write!(out, "{x}");
+        // An integral value keeps a decimal point: extended XYZ readers
+        // (ASE) type `Time=20` as an integer, `Time=20.0` as a float.
+        if x.is_finite() && !out[start..].contains('.') {
+            out.push_str(".0");
+        }
     } else {
         let _ = write!(out, "{x:e}");
     }
