@@ -27,9 +27,9 @@
 
 use std::time::Instant;
 
+use geoshake::runtime::particles::io::{read_lammps_data, FileError};
 use geoshake::runtime::particles::{
-    generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
-    Table,
+    generate, Options, ParticleState, ParticleSystem, Rattle, SolverChoice, Table,
 };
 
 /// CPU time of this thread (the machine is shared: wall time alone would
@@ -308,103 +308,17 @@ fn max_rel_velocity(table: &Table, inverse_masses: &[f64], state: &ParticleState
 }
 
 /// The rigid waters of a LAMMPS data file (atom_style molecular) written by
-/// `bench/lammps/gen_data.py`: unwrapped positions (Å), velocities (Å/fs),
-/// masses (g/mol) turned into p = m v, and per molecule the two O–H bonds
-/// (1.0 Å) and the H–H distance 2 sin(θ/2) of the H–O–H angle θ = 109.47°,
-/// which is how LAMMPS' `shake … b 1 a 1` constrains the angle.
-fn lammps_water(path: &str) -> Result<(ParticleSystem, ParticleState), String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-    let bad = |what: &str, line: &str| format!("{path}: cannot read {what} from `{line}`");
-    let mut lines = text.lines();
-    let (mut q, mut v, mut types) = (Vec::new(), Vec::new(), Vec::new());
-    let mut box_len = [0.0f64; 3];
-    let mut type_mass = std::collections::HashMap::new();
-    let mut pairs: Vec<(usize, usize, f64)> = Vec::new();
-    let r_hh = 2.0 * (109.47f64.to_radians() / 2.0).sin();
-    while let Some(line) = lines.next() {
-        let w: Vec<&str> = line.split_whitespace().collect();
-        match w.as_slice() {
-            [n, "atoms"] => {
-                let n: usize = n.parse().map_err(|_| bad("the atom count", line))?;
-                (q, v, types) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0usize; n]);
-            }
-            [lo, hi, lab, _] if lab.ends_with("lo") => {
-                let k = (lab.as_bytes()[0] - b'x') as usize;
-                let (lo, hi): (f64, f64) = (
-                    lo.parse().map_err(|_| bad("the box", line))?,
-                    hi.parse().map_err(|_| bad("the box", line))?,
-                );
-                if k < 3 {
-                    box_len[k] = hi - lo;
-                }
-            }
-            [section @ ("Masses" | "Atoms" | "Bonds" | "Angles" | "Velocities"), ..] => {
-                lines.next(); // the blank line under a section header
-                for row in lines.by_ref() {
-                    let r: Vec<&str> = row.split_whitespace().collect();
-                    if r.is_empty() {
-                        break;
-                    }
-                    let num = |i: usize| -> Result<f64, String> {
-                        r.get(i)
-                            .and_then(|s| s.parse().ok())
-                            .ok_or_else(|| bad(section, row))
-                    };
-                    let idx = |i: usize| -> Result<usize, String> {
-                        r.get(i)
-                            .and_then(|s| s.parse::<usize>().ok())
-                            .filter(|&a| a >= 1 && a <= types.len())
-                            .map(|a| a - 1)
-                            .ok_or_else(|| bad(section, row))
-                    };
-                    match *section {
-                        "Masses" => {
-                            type_mass.insert(num(0)? as usize, num(1)?);
-                        }
-                        "Atoms" => {
-                            let a = idx(0)?;
-                            types[a] = num(2)? as usize;
-                            for c in 0..3 {
-                                q[3 * a + c] = num(3 + c)? + num(6 + c)? * box_len[c];
-                            }
-                        }
-                        "Bonds" => pairs.push((idx(2)?, idx(3)?, 1.0)),
-                        "Angles" => pairs.push((idx(2)?, idx(4)?, r_hh)),
-                        _ => {
-                            let a = idx(0)?;
-                            for c in 0..3 {
-                                v[3 * a + c] = num(1 + c)?;
-                            }
-                        }
-                    }
-                }
-            }
-            _ => {}
-        }
-    }
-    let masses = types
-        .iter()
-        .map(|t| {
-            type_mass
-                .get(t)
-                .copied()
-                .ok_or(format!("{path}: no mass for atom type {t}"))
-        })
-        .collect::<Result<Vec<f64>, _>>()?;
-    let p = v
-        .iter()
-        .enumerate()
-        .map(|(i, v)| masses[i / 3] * v)
-        .collect();
-    // The file lists all bonds, then all angles: order them molecule by
-    // molecule so that each cluster's rows are neighbours in memory.
-    pairs.sort_by_key(|&(a, b, _)| (a.min(b), a.max(b)));
-    let mut table = Table::with_capacity(2, 1, pairs.len());
-    for (a, b, l) in pairs {
-        table.push(&[a, b], &[l]).map_err(|e| e.to_string())?;
-    }
-    let system = ParticleSystem::new(3, masses)
-        .and_then(|s| s.with_constraints("bond", Distance::<3>, table))
-        .map_err(|e| e.to_string())?;
-    Ok((system, ParticleState::new(q, p)))
+/// `bench/lammps/gen_data.py`, read by `particles::io`: unwrapped positions
+/// (Å), velocities (Å/fs) and masses (g/mol) turned into p = m v, and per
+/// molecule the two O–H bonds (type 1, 1.0 Å) and the H–H distance
+/// 2 sin(θ/2) of the H–O–H angle (type 1, θ = 109.47°), which is how
+/// LAMMPS' `shake … b 1 a 1` constrains the angle. The constraints are
+/// sorted molecule by molecule, so that each cluster's rows are neighbours
+/// in memory.
+fn lammps_water(path: &str) -> Result<(ParticleSystem, ParticleState), FileError> {
+    read_lammps_data(path)?
+        .rigid()
+        .bond_length(1, 1.0)
+        .angle_degrees(1, 109.47)
+        .build()
 }

@@ -48,7 +48,7 @@ const LAYERS: &[(&str, u8)] = &[
     ("particles/virial", 5), ("particles/adjust", 5),
     ("run", 6), ("trajectory", 6), ("particles/run", 6),
     ("integrator", 7), ("initial_data", 7), ("keep_positions", 7), ("validate", 7),
-    ("particles", 7), ("particles/generate", 7), ("ensemble", 7), ("ensemble_store", 7),
+    ("particles", 7), ("particles/generate", 7), ("particles/io", 7), ("ensemble", 7), ("ensemble_store", 7),
     ("ensemble_mpi", 7), ("io", 7), ("io_arrow", 7), ("progress", 7), ("sampler", 7),
     ("lib", 7),
 ];

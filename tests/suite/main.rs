@@ -43,6 +43,7 @@ mod particles_alloc;
 mod particles_driver;
 mod particles_errors;
 mod particles_forces;
+mod particles_io;
 mod particles_langevin;
 mod particles_paths;
 mod particles_result_scale;

@@ -65,6 +65,7 @@ mod forces;
 pub mod generate;
 mod global;
 mod graph;
+pub mod io;
 mod langevin;
 mod options;
 mod plan;
