@@ -44,6 +44,7 @@ mod particles_driver;
 mod particles_errors;
 mod particles_forces;
 mod particles_langevin;
+mod particles_overflow;
 mod particles_paths;
 mod particles_result_scale;
 mod particles_review;
