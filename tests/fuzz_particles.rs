@@ -378,8 +378,9 @@ fn dist(q: &[f64], d: usize, i: usize, j: usize) -> f64 {
 fn build(case: &Case) -> Built {
     let d = case.dim;
     let mut rng = Lcg(case.seed | 1);
-    let (mut q, mut masses, mut bonds): (Vec<f64>, Vec<f64>, Vec<(usize, usize, f64)>) =
-        (Vec::new(), Vec::new(), Vec::new());
+    let mut q: Vec<f64> = Vec::new();
+    let mut masses: Vec<f64> = Vec::new();
+    let mut bonds: Vec<(usize, usize, f64)> = Vec::new();
     let s = case.scale;
     let add = |q: &mut Vec<f64>, x: Vec<f64>| q.extend(x);
     match case.shape {
@@ -700,10 +701,10 @@ fn judge_state(
     if let Some(why) = off_m(b, case.options.tol, z.q()) {
         return Verdict::Silent(format!("Ok but {why}"));
     }
-    if hidden_applies(case) {
-        if let Some(why) = off_hidden_after_step(case, b, before.q(), z.q(), z.p(), before.p()) {
-            return Verdict::Silent(format!("Ok but {why}"));
-        }
+    if hidden_applies(case)
+        && let Some(why) = off_hidden_after_step(case, b, before.q(), z.q(), z.p(), before.p())
+    {
+        return Verdict::Silent(format!("Ok but {why}"));
     }
     if !finite(z.p()) {
         return Verdict::Silent("Ok but non-finite momenta".into());
@@ -826,12 +827,10 @@ fn run_case(case: &Case) -> Verdict {
                             z.step()
                         ));
                     }
-                    if z.step() > 0 {
-                        if let Verdict::Silent(why) = judge_state(case, &b, &z, &before, 0.0) {
-                            return Verdict::Silent(format!(
-                                "run_in_place's last good state: {why}"
-                            ));
-                        }
+                    if z.step() > 0
+                        && let Verdict::Silent(why) = judge_state(case, &b, &z, &before, 0.0)
+                    {
+                        return Verdict::Silent(format!("run_in_place's last good state: {why}"));
                     }
                     typed(e)
                 }
