@@ -44,17 +44,14 @@
 // The test kit under the name the tests use (`common::models`, …).
 use geoshake_testkit as common;
 
+use common::fuzz::{assert_clean, env_u64, fuzz_cases, hostile, step_error_kind as kind, Verdict};
 use common::models::*;
 use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, NewtonOptions, Options,
     State, StepError, Stop, StormerVerlet, SymplecticEuler,
 };
 use proptest::prelude::*;
-use proptest::strategy::ValueTree;
-use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
-use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Cases of the CI run.
 const CI_CASES: u64 = 10_000;
@@ -135,31 +132,6 @@ struct Case {
     options: Options,
     start: Start,
     op: Op,
-}
-
-/// A value a hostile user might pass where `normal` is expected: mostly
-/// normal, otherwise a special value or a random power of ten of either sign.
-fn hostile(normal: std::ops::Range<f64>) -> impl Strategy<Value = f64> {
-    prop_oneof![
-        8 => normal,
-        1 => prop::sample::select(vec![
-            0.0,
-            -0.0,
-            f64::NAN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::MAX,
-            -f64::MAX,
-            f64::MIN_POSITIVE,
-            5e-324,
-            f64::EPSILON,
-            1e-300,
-            1e300,
-            -1.0,
-        ]),
-        1 => (-320i32..309, any::<bool>())
-            .prop_map(|(e, neg)| if neg { -(10f64.powi(e)) } else { 10f64.powi(e) }),
-    ]
 }
 
 fn sys_strategy() -> impl Strategy<Value = Sys> {
@@ -395,35 +367,6 @@ fn initial(sys: &Sys, start: &Start) -> State {
 // ---------------------------------------------------------------------------
 // Verdicts
 // ---------------------------------------------------------------------------
-
-#[derive(Clone, Debug)]
-enum Verdict {
-    Ok,
-    Typed(&'static str),
-    Silent(String),
-    Panic(String),
-}
-
-fn kind(e: &StepError) -> &'static str {
-    match e {
-        StepError::InvalidInput { .. } => "InvalidInput",
-        StepError::Shape { .. } => "Shape",
-        StepError::Topology(_) => "Topology",
-        StepError::Solver { .. } => "Solver",
-        StepError::Unavailable { .. } => "Unavailable",
-        StepError::AtMember { .. } => "AtMember",
-        StepError::Storage { .. } => "Storage",
-        StepError::NonFinite { .. } => "NonFinite",
-        StepError::NewtonNotConverged { .. } => "NewtonNotConverged",
-        StepError::NondegeneracyLost { .. } => "NondegeneracyLost",
-        StepError::SingularShakeJacobian { .. } => "SingularShakeJacobian",
-        StepError::SingularNondegeneracyMatrix { .. } => "SingularNondegeneracyMatrix",
-        StepError::ComponentJump { .. } => "ComponentJump",
-        StepError::FibreJump { .. } => "FibreJump",
-        StepError::BranchJump { .. } => "BranchJump",
-        StepError::NotOnConstraint { .. } => "NotOnConstraint",
-    }
-}
 
 /// The largest bound `Options::constraint_tolerance` puts on |g_i| at z:
 /// tol · (s/2)² + 64ε · s · (‖q‖∞, ‖p‖∞ or ‖z‖∞: the variables g_i reads),
@@ -696,168 +639,11 @@ fn run_case(case: &Case) -> Verdict {
 }
 
 // ---------------------------------------------------------------------------
-// Driver: a worker thread per batch, a watchdog per case
+// Driver: the test kit's (`common::fuzz`), with this file's judge
 // ---------------------------------------------------------------------------
 
-#[derive(Default, Debug)]
-struct Counts {
-    cases: u64,
-    ok: u64,
-    typed: std::collections::BTreeMap<&'static str, u64>,
-    silent: u64,
-    panics: u64,
-    hangs: u64,
-    examples: Vec<String>,
-    silent_classes: std::collections::BTreeMap<String, u64>,
-}
-
-impl Counts {
-    fn typed_total(&self) -> u64 {
-        self.typed.values().sum()
-    }
-    fn note(&mut self, what: &str, case: &Case, detail: &str) {
-        // One example per class (the first words of the detail), and a
-        // count per class for the report.
-        let class: String = format!(
-            "{what}: {}",
-            detail
-                .split(|c: char| c.is_ascii_digit() || c == '(')
-                .next()
-                .unwrap_or("")
-        );
-        let n = self.silent_classes.entry(class).or_insert(0);
-        *n += 1;
-        if *n == 1 && self.examples.len() < 40 {
-            self.examples
-                .push(format!("{what}: {detail}\n    {case:?}"));
-        }
-    }
-}
-
-/// A worker that evaluates cases sent to it; a panic inside a case is caught
-/// and reported as such.
-fn spawn_worker() -> (mpsc::Sender<Case>, mpsc::Receiver<Verdict>) {
-    let (tx_case, rx_case) = mpsc::channel::<Case>();
-    let (tx_v, rx_v) = mpsc::channel::<Verdict>();
-    std::thread::spawn(move || {
-        for case in rx_case {
-            let v = catch_unwind(AssertUnwindSafe(|| run_case(&case))).unwrap_or_else(|p| {
-                let msg = p
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| p.downcast_ref::<String>().cloned())
-                    .unwrap_or_default();
-                Verdict::Panic(msg)
-            });
-            if tx_v.send(v).is_err() {
-                return;
-            }
-        }
-    });
-    (tx_case, rx_v)
-}
-
-fn fuzz(cases: u64, seed: u64) -> Counts {
-    let mut seed_bytes = [0u8; 32];
-    seed_bytes[..8].copy_from_slice(&seed.to_le_bytes());
-    let mut runner = TestRunner::new_with_rng(
-        Config::default(),
-        TestRng::from_seed(RngAlgorithm::ChaCha, &seed_bytes),
-    );
-    let strategy = case_strategy();
-    let generated = (0..cases).map(move |_| strategy.new_tree(&mut runner).unwrap().current());
-    let started = Instant::now();
-    let counts = fuzz_cases(generated);
-    eprintln!(
-        "fuzz_api: {} cases in {:.1} s (seed {seed})",
-        counts.cases,
-        started.elapsed().as_secs_f64()
-    );
-    counts
-}
-
-/// Runs the cases on a worker thread under the watchdog and counts verdicts.
-fn fuzz_cases(cases: impl IntoIterator<Item = Case>) -> Counts {
-    // Panics are counted, not printed (each would print a backtrace line).
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
-    let mut counts = Counts::default();
-    let (mut tx, mut rx) = spawn_worker();
-    for case in cases {
-        counts.cases += 1;
-        tx.send(case.clone()).unwrap();
-        match rx.recv_timeout(DEADLINE) {
-            Ok(Verdict::Ok) => counts.ok += 1,
-            Ok(Verdict::Typed(k)) => {
-                // Audit one kind of refusal: are they all deserved?
-                if std::env::var("SHAKE_FUZZ_PRINT_TYPED").is_ok_and(|v| v == k) {
-                    eprintln!("typed {k}: {case:?}");
-                }
-                *counts.typed.entry(k).or_insert(0) += 1
-            }
-            Ok(Verdict::Silent(why)) => {
-                counts.silent += 1;
-                // The long mode can list every silent case, not one per
-                // class: each is a lead to follow.
-                if std::env::var_os("SHAKE_FUZZ_PRINT_SILENT").is_some() {
-                    eprintln!("silent case: {why}\n    {case:?}");
-                }
-                counts.note("silent", &case, &why);
-            }
-            Ok(Verdict::Panic(msg)) => {
-                counts.panics += 1;
-                counts.note("panic", &case, &msg);
-            }
-            Err(_) => {
-                // The worker is stuck in the library: leave it (a thread
-                // cannot be killed) and carry on with a fresh one.
-                counts.hangs += 1;
-                counts.note("hang", &case, "no answer within the deadline");
-                (tx, rx) = spawn_worker();
-                if counts.hangs >= 8 {
-                    eprintln!("stopping after 8 hangs (each leaves a spinning thread)");
-                    break;
-                }
-            }
-        }
-    }
-    std::panic::set_hook(hook);
-    eprintln!(
-        "{} cases: ok {}, typed errors {} {:?}, silent {}, panics {}, hangs {}",
-        counts.cases,
-        counts.ok,
-        counts.typed_total(),
-        counts.typed,
-        counts.silent,
-        counts.panics,
-        counts.hangs
-    );
-    for (class, n) in &counts.silent_classes {
-        eprintln!("  {n:>8}  {class}");
-    }
-    for e in &counts.examples {
-        eprintln!("{e}");
-    }
-    counts
-}
-
-fn env_u64(name: &str, default: u64) -> u64 {
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-fn assert_clean(c: &Counts) {
-    assert_eq!(
-        (c.silent, c.panics, c.hangs),
-        (0, 0, 0),
-        "silent wrong numbers, panics, hangs (examples above)"
-    );
-    assert_eq!(
-        c.ok + c.typed_total() + c.silent + c.panics + c.hangs,
-        c.cases
-    );
+fn fuzz(cases: u64, seed: u64) -> common::fuzz::Counts {
+    common::fuzz::fuzz("fuzz_api", case_strategy(), run_case, DEADLINE, cases, seed)
 }
 
 #[test]
@@ -930,6 +716,6 @@ fn extreme_parameters_end_in_a_verdict() {
             }
         }
     }
-    let c = fuzz_cases(cases);
+    let c = fuzz_cases(cases, run_case, DEADLINE);
     assert_clean(&c);
 }

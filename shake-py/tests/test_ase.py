@@ -162,3 +162,27 @@ def test_solver_errors_name_the_bond():
     np.testing.assert_array_equal(atoms.positions, [[0, 0, 0], [1, 0, 0]])
     with pytest.raises(geoshake.InvalidInputError, match="tol"):
         FixBondLengths([(0, 1)], tolerance=0.0).adjust_positions(atoms, atoms.get_positions())
+
+
+@pytest.mark.parametrize(
+    "pairs, match",
+    [
+        ([(0, 1), (1, 5)], "pair 1 is \\(1, 5\\)"),
+        ([(0, 1), (-1, 0)], "pair 1 is \\(-1, 0\\)"),
+        ([(0.5, 1.5)], "atom indices"),
+        ([0, 1], "\\(m, 2\\)"),
+    ],
+)
+def test_bad_pairs_are_the_package_error_not_numpy_indexing(pairs, match):
+    # Out of range, negative, not integers, not (m, 2): refused before they
+    # index the positions for the bond lengths (NumPy's IndexError, or a
+    # negative index silently taken from the end).
+    from ase import Atoms
+
+    atoms = Atoms("H3", positions=[[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    c = FixBondLengths(pairs)
+    new = atoms.get_positions()
+    with pytest.raises(geoshake.InvalidInputError, match=match):
+        c.adjust_positions(atoms, new)
+    with pytest.raises(geoshake.InvalidInputError, match=match):
+        c.adjust_momenta(atoms, np.zeros((3, 3)))

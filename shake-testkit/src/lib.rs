@@ -7,6 +7,8 @@
 //! - [`reference`](mod@reference): an integrator and exact solutions independent of the
 //!   runtime (dual-number derivatives, high-order collocation, closed forms);
 //! - [`alloc`]: a counting global allocator for the no-allocation tests;
+//! - [`fuzz`]: the hostile-input suites' driver (seeded cases, a watchdog,
+//!   counts by verdict);
 //! - [`hopf_lab`]: the computations behind the Section 5.4 scenes and
 //!   `tests/suite/paper_hopf.rs`;
 //! - [`plot`]: the figure helpers of `examples/paper` and
@@ -23,6 +25,7 @@
 
 pub mod alloc;
 pub mod bench;
+pub mod fuzz;
 pub mod hopf_lab;
 pub mod models;
 pub mod plot;

@@ -45,6 +45,7 @@ mod particles_errors;
 mod particles_forces;
 mod particles_io;
 mod particles_langevin;
+mod particles_overflow;
 mod particles_paths;
 mod particles_result_scale;
 mod particles_review;

@@ -174,3 +174,126 @@ fn a_triangle_forced_collinear_is_a_typed_error() {
         }
     }
 }
+
+/// `shake_positions` from old positions off M (a bond three times its
+/// length): the coupled solvers' Newton judged g(x) against the scale
+/// |∇g(q0)| · extent(q0) of the old positions only, and returned `Ok` with
+/// the bond 8 tolerances off its length (band and sparse; found by
+/// `tests/fuzz_particles.rs`). The result is now judged at its own scale.
+#[test]
+fn shake_positions_from_old_positions_off_m_ends_on_m_or_fails() {
+    let tol = 4.912170617605574e-9;
+    let l = 0.5919414102316596;
+    let bonds = [(0, 1, l)];
+    for solver in SOLVERS {
+        let table = {
+            let mut t = Table::new(2, 1);
+            t.push(&[0, 1], &[l]).unwrap();
+            t
+        };
+        let sys = ParticleSystem::new(3, vec![11.43, 0.921])
+            .unwrap()
+            .with_constraints("bond", Distance::<3>, table)
+            .unwrap();
+        let options = Options {
+            solver,
+            tol,
+            ..Options::default()
+        };
+        let mut r = Rattle::new(sys, 0.1, options).unwrap();
+        let q0 = [0.0, 0.0, 0.0, 1.913, 0.0, 0.0];
+        let mut x = [0.01, 0.005, 0.0, 1.903, 0.003, 0.002];
+        match r.shake_positions(&q0, &mut x) {
+            Ok(_) => {
+                let err = length_error(&x, &bonds);
+                assert!(err <= 2.0 * tol, "{solver:?}: Ok with length error {err:e}");
+            }
+            Err(e) => assert!(
+                matches!(
+                    e,
+                    StepError::AtMember {
+                        source: SolveError::NotConverged { .. },
+                        ..
+                    }
+                ),
+                "{solver:?}: {e}"
+            ),
+        }
+    }
+}
+
+/// Momenta of 1e300 on a mass of 1e-308: M⁻¹p overflows, and `project`
+/// (and `project_momenta`) on the coupled solvers returned `Ok` with NaN
+/// momenta (the hidden residual's NaN was dropped by `f64::max`; found by
+/// `tests/fuzz_particles.rs`). Now a typed error, or a finite result.
+#[test]
+fn a_projection_whose_velocities_overflow_is_refused() {
+    let bonds = [(0, 1, 1.15)];
+    for solver in SOLVERS {
+        let q = vec![0.0, 0.0, 0.0, 0.9, 0.0, 0.0];
+        let p = vec![1e300, -5e299, 2e299, -3e299, 1e300, 4e299];
+        let mut r = bonded(vec![13.5, 2.2250738585072014e-308], &bonds, solver);
+        let mut z = ParticleState::new(q.clone(), p.clone());
+        if r.project(&mut z).is_ok() {
+            assert!(
+                z.q().iter().chain(z.p()).all(|x| x.is_finite()),
+                "{solver:?}: project Ok with {:?}",
+                z.p()
+            );
+        }
+        let mut p1 = p.clone();
+        if r.project_momenta(&q, &mut p1).is_ok() {
+            assert!(
+                p1.iter().all(|x| x.is_finite()),
+                "{solver:?}: project_momenta Ok with {p1:?}"
+            );
+        } else {
+            assert_eq!(p1, p, "{solver:?}: p changed by a failed call");
+        }
+    }
+}
+
+/// The same for a SHAKE step (no velocity stage to judge q1 at its own
+/// scale) from a start with the bond three times its length: `Ok` with
+/// the bond 4 tolerances off on the band solver before.
+#[test]
+fn a_shake_step_from_off_m_ends_on_m_or_fails() {
+    let tol = 1e-10;
+    let l = 0.5212383429355556;
+    let bonds = [(0, 1, l)];
+    for solver in SOLVERS {
+        let mut t = Table::new(2, 1);
+        t.push(&[0, 1], &[l]).unwrap();
+        let sys = ParticleSystem::new(3, vec![12.05, 1.19])
+            .unwrap()
+            .with_constraints("bond", Distance::<3>, t)
+            .unwrap();
+        let options = Options {
+            solver,
+            tol,
+            method: geoshake::runtime::particles::Method::Shake,
+            ..Options::default()
+        };
+        let mut r = Rattle::new(sys, 0.0066, options).unwrap();
+        let mut z = ParticleState::new(
+            vec![0.0, 0.0, 0.0, 0.3, 1.0, 0.9],
+            vec![0.1, -0.2, 0.05, 0.3, 0.1, -0.2],
+        );
+        match r.step(&mut z) {
+            Ok(_) => {
+                let err = length_error(z.q(), &bonds);
+                assert!(err <= 2.0 * tol, "{solver:?}: Ok with length error {err:e}");
+            }
+            Err(e) => assert!(
+                matches!(
+                    e,
+                    StepError::AtMember {
+                        source: SolveError::NotConverged { .. },
+                        ..
+                    }
+                ),
+                "{solver:?}: {e}"
+            ),
+        }
+    }
+}

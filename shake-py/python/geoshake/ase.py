@@ -38,7 +38,7 @@ error's ``member`` is its row in ``pairs`` and ``pair`` its two atoms.
 
 import numpy as np
 
-from ._geoshake import Bonds, ShakeError
+from ._geoshake import Bonds, InvalidInputError, ShakeError
 
 try:  # ASE's base class when ASE is installed: ``isinstance`` checks pass.
     from ase.constraints import FixConstraint as _Base
@@ -168,6 +168,10 @@ class FixBondLengths(_Base):
         first call and again whenever one of them changes."""
         if len(self.pairs) == 0:
             return None
+        # Checked before the pairs index the positions (for the lengths,
+        # the minimum image): a bad pair is the package's error, as in
+        # Bonds, not NumPy's IndexError.
+        _check_pairs(self.pairs, len(atoms))
         if self.bondlengths is None:
             self.bondlengths = self.initialize_bond_lengths(atoms)
         masses = atoms.get_masses()
@@ -238,6 +242,24 @@ class FixBondLengths(_Base):
             if member is not None:
                 e.pair = tuple(int(i) for i in self.pairs[member])
             raise
+
+
+def _check_pairs(pairs, atoms):
+    """Refuses pairs that are not an (m, 2) array of atom indices in
+    0 .. atoms − 1 with InvalidInputError."""
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or pairs.dtype.kind not in "iu":
+        raise InvalidInputError(
+            f"pairs must be an (m, 2) array of atom indices, not shape {pairs.shape} "
+            f"of dtype {pairs.dtype}"
+        )
+    bad = (pairs < 0) | (pairs >= atoms)
+    if bad.any():
+        row = int(np.argwhere(bad)[0][0])
+        raise InvalidInputError(
+            f"pair {row} is {tuple(int(i) for i in pairs[row])}: "
+            f"atom indices must lie in 0 .. {atoms - 1}"
+        )
 
 
 def FixBondLength(a1, a2):

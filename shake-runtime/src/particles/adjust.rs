@@ -27,9 +27,10 @@ impl Rattle {
     /// Refuses q0 or x of a length other than n·D ([`StepError::Shape`]),
     /// a NaN or infinite entry ([`StepError::NonFinite`], `entry` the index
     /// in the array named), and reports a Newton failure at the member
-    /// where it happened ([`StepError::AtMember`], stage SHAKE); `x` is
-    /// left as it was on error. Errors name step 0 and t = 0: the call
-    /// belongs to no step of this solver. The caches a step reuses (N's
+    /// where it happened ([`StepError::AtMember`], stage SHAKE; the result
+    /// is judged at its own scale, |∇g(x)| · extent(x), whatever q0's);
+    /// `x` is left as it was on error. Errors name step 0 and t = 0: the
+    /// call belongs to no step of this solver. The caches a step reuses (N's
     /// factor, the multipliers, the constraint forces) are forgotten.
     ///
     /// ```
@@ -69,6 +70,7 @@ impl Rattle {
                 }
                 e
             })?;
+        self.confirm_positions(0, 0.0, &report)?;
         x.copy_from_slice(&self.qn);
         Ok(report)
     }
@@ -88,7 +90,8 @@ impl Rattle {
     /// M⁻¹, as ASE's `adjust_forces` asks.
     ///
     /// Refuses q or p of a length other than n·D ([`StepError::Shape`]),
-    /// a NaN or infinite entry ([`StepError::NonFinite`]; `entry` counts
+    /// a NaN or infinite entry, given or in the result (velocities M⁻¹p
+    /// that overflow; [`StepError::NonFinite`]; `entry` counts
     /// z = (q, p): n·D + i for p's entry i), and a singular N at q
     /// ([`StepError::AtMember`], stage RATTLE); `p` is left as it was on
     /// error. Errors name step 0 and t = 0. The caches a step reuses are
@@ -120,6 +123,7 @@ impl Rattle {
         let mut report = particle_report();
         self.velocity_stage(false, 0, 0.0, &mut report)?;
         report.rattle_iterations = 1;
+        Self::not_finite(0, 0.0, "projected momenta p", &self.pn, q.len())?;
         p.copy_from_slice(&self.pn);
         Ok(report)
     }

@@ -312,22 +312,7 @@ impl Global {
         // used q0's, which from far off M is the far point's): g(q1) and
         // the scales at q1 are in hand from the gradients above.
         if let Some(tol) = position_tol {
-            let mut worst_g = 0.0f64;
-            let mut worst_c = 0;
-            for (c, (&g, &s)) in self.g.iter().zip(&self.scale1).enumerate() {
-                let r = g.abs() / s;
-                if !(r <= worst_g) {
-                    worst_g = r;
-                    worst_c = c;
-                }
-            }
-            if !(worst_g <= tol) {
-                let source = SolveError::NotConverged {
-                    iterations: report.shake_iterations,
-                    residual: worst_g,
-                };
-                return Err(num.error_at(system, worst_c, Stage::Shake, k, time, source));
-            }
+            self.judge_at_q1(system, num, tol, report.shake_iterations, k, time)?;
         }
         // The hidden residual after projection, relative per member: above
         // round-off after an exact solve (or NaN), N is singular to
@@ -343,8 +328,65 @@ impl Global {
         Ok(())
     }
 
+    /// The position stage's result q1 judged at its own scale: g(q1) and
+    /// |∇g(q1)| · extent(q1) evaluated (into `g`, `grad1`, `scale1`), then
+    /// [`judge_at_q1`](Self::judge_at_q1). For a position stage that no
+    /// velocity stage follows (`Rattle::shake_positions`): the stage's own
+    /// test uses q0's scale, which for old positions off M is not q1's.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn confirm_positions(
+        &mut self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        q1: &[f64],
+        tol: f64,
+        iterations: usize,
+        k: u64,
+        time: f64,
+    ) -> Result<(), StepError> {
+        Self::gradients(
+            system,
+            num,
+            q1,
+            &mut self.g,
+            &mut self.grad1,
+            &mut self.scale1,
+        );
+        self.judge_at_q1(system, num, tol, iterations, k, time)
+    }
+
+    /// `NotConverged` (stage SHAKE) at the worst member unless every
+    /// |g_k(q1)| / scale1_k ≤ tol; `g` and `scale1` hold q1's.
+    fn judge_at_q1(
+        &self,
+        system: &ParticleSystem,
+        num: &Numbering,
+        tol: f64,
+        iterations: usize,
+        k: u64,
+        time: f64,
+    ) -> Result<(), StepError> {
+        let mut worst_g = 0.0f64;
+        let mut worst_c = 0;
+        for (c, (&g, &s)) in self.g.iter().zip(&self.scale1).enumerate() {
+            let r = g.abs() / s;
+            if !(r <= worst_g) {
+                worst_g = r;
+                worst_c = c;
+            }
+        }
+        if !(worst_g <= tol) {
+            let source = SolveError::NotConverged {
+                iterations,
+                residual: worst_g,
+            };
+            return Err(num.error_at(system, worst_c, Stage::Shake, k, time, source));
+        }
+        Ok(())
+    }
+
     /// delta ← G(q1) W p (grad1); with `ratio`, the largest relative hidden
-    /// residual.
+    /// residual (NaN if any member's is).
     pub(super) fn hidden(
         &mut self,
         system: &ParticleSystem,
@@ -365,7 +407,10 @@ impl Global {
                 &mut self.before[c0..c1],
                 ratio,
             );
-            worst = worst.max(w);
+            // (`f64::max` would drop a NaN: a non-finite residual must fail.)
+            if !(w <= worst) {
+                worst = w;
+            }
         }
         worst
     }

@@ -373,6 +373,16 @@ impl Rattle {
             // has stamp 0 and ties to nothing).
             self.force_stamp = state.stamp;
         }
+        // Finite forces do not make V finite (a field of 1e300 times a
+        // coordinate of 1e10).
+        if !self.potential.is_finite() {
+            return Err(StepError::NonFinite {
+                what: "potential energy V(q)",
+                step: state.step,
+                t: state.time,
+                entry: 0,
+            });
+        }
         Ok(self.potential)
     }
 
@@ -504,6 +514,11 @@ impl Rattle {
             }
         }
         self.position_stage(&state.q, state.stamp, continued, 1.0 / h, k, time, report)?;
+        if self.options.method == Method::Shake {
+            // RATTLE's velocity stage judges q1 at its own scale; without
+            // it, the coupled solvers' test at q0's scale is all there is.
+            self.confirm_positions(k, time, report)?;
+        }
         if self.has_potential {
             self.closing_kick(k, time)?;
         }
@@ -551,6 +566,10 @@ impl Rattle {
         self.position_stage(&state.q, 0, false, 0.0, k, time, &mut report)?;
         self.velocity_stage(true, k, time, &mut report)?;
         report.rattle_iterations = 1;
+        // As after a step: velocities that overflow (momenta of 1e300 on a
+        // mass of 1e-300) make the projection NaN without a failed solve.
+        Self::not_finite(k, time, "projected state", &self.qn, 0)?;
+        Self::not_finite(k, time, "projected state", &self.pn, self.qn.len())?;
         std::mem::swap(&mut state.q, &mut self.qn);
         std::mem::swap(&mut state.p, &mut self.pn);
         state.stamp = 0;
@@ -632,6 +651,28 @@ impl Rattle {
                     report,
                 )
             }
+        }
+    }
+
+    /// On the coupled path, the position stage's result in `qn` judged at
+    /// its own scale (the clusters judge every iterate at its own).
+    pub(super) fn confirm_positions(
+        &mut self,
+        k: u64,
+        time: f64,
+        report: &StepInfo,
+    ) -> Result<(), StepError> {
+        match &mut self.path {
+            Path::Clusters { .. } => Ok(()),
+            Path::Global(g) => g.confirm_positions(
+                &self.system,
+                &self.num,
+                &self.qn,
+                self.options.tol,
+                report.shake_iterations,
+                k,
+                time,
+            ),
         }
     }
 

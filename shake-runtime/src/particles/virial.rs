@@ -94,7 +94,9 @@ impl Rattle {
     /// an older state, or one made by a thermostatted step (a (g-)BAOAB
     /// step spreads the constraint forces over its drifts and projections,
     /// so it has no single f_c at q0); with [`StepError::Shape`] when `out`
-    /// was made for another system.
+    /// was made for another system; with [`StepError::NonFinite`] when a
+    /// multiplier, force or virial entry overflows (h near the bottom of
+    /// f64's range: Λ = 2ν/h²).
     pub fn constraint_forces(
         &self,
         state: &ParticleState,
@@ -154,6 +156,15 @@ impl Rattle {
         }
         out.step = state.step;
         out.time = state.time - self.h;
+        // Λ = 2ν/h² overflows for a step size near the bottom of f64's
+        // range: a typed error, not forces of NaN or ∞.
+        for (what, v) in [
+            ("constraint multipliers", &out.multipliers),
+            ("constraint forces", &out.forces),
+            ("constraint virial", &out.virial),
+        ] {
+            Rattle::not_finite(state.step, state.time, what, v, 0)?;
+        }
         Ok(())
     }
 }
