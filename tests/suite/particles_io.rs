@@ -778,7 +778,8 @@ fn a_run_from_a_data_file_is_the_scale_example_run() {
 
 /// ASE reads our extended XYZ: cell, positions, momenta, step and time.
 /// Needs a Python with ASE: `GEOSHAKE_PYTHON` or `python3`; skipped (with
-/// the reason printed) without one.
+/// the reason printed) without one, unless `GEOSHAKE_REQUIRE_ASE` is set
+/// (CI sets both, to the Python package's venv, which has ASE).
 #[test]
 fn ase_reads_our_extxyz() {
     let python = std::env::var("GEOSHAKE_PYTHON").unwrap_or_else(|_| "python3".into());
@@ -787,6 +788,10 @@ fn ase_reads_our_extxyz() {
         .output()
         .is_ok_and(|o| o.status.success());
     if !has_ase {
+        assert!(
+            std::env::var_os("GEOSHAKE_REQUIRE_ASE").is_none(),
+            "GEOSHAKE_REQUIRE_ASE is set but `{python} -c 'import ase'` fails"
+        );
         eprintln!(
             "ase_reads_our_extxyz: skipped, `{python} -c 'import ase'` fails (set GEOSHAKE_PYTHON)"
         );
