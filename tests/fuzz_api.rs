@@ -44,7 +44,9 @@
 // The test kit under the name the tests use (`common::models`, …).
 use geoshake_testkit as common;
 
-use common::fuzz::{assert_clean, env_u64, fuzz_cases, hostile, step_error_kind as kind, Verdict};
+use common::fuzz::{
+    assert_clean, env_u64, fuzz_cases, hostile, judge_end, step_error_kind as kind, Verdict,
+};
 use common::models::*;
 use geoshake::{
     BaseMap, Composition, ConstrainedSystem, ImplicitMidpoint, Integrator, NewtonOptions, Options,
@@ -549,38 +551,7 @@ fn judge<S: ConstrainedSystem + Clone, B: BaseMap>(
                     ));
                 }
             }
-            match &out.error {
-                None => {
-                    if traj.is_empty() {
-                        return Verdict::Silent("Ok with an empty trajectory".into());
-                    }
-                    Verdict::Ok
-                }
-                Some(e) => {
-                    let k = e.step();
-                    if let Some(te) = e.time() {
-                        let t = t0 + k as f64 * h;
-                        if !(te == t || (te.is_nan() && t.is_nan())) {
-                            return Verdict::Silent(format!(
-                                "{} at step {k} reports t = {te}, not t0 + k·h = {t}",
-                                kind(e)
-                            ));
-                        }
-                    }
-                    if k >= 1 {
-                        match traj.len().checked_sub(1).map(|i| traj.step(i)) {
-                            Some(last) if last + 1 == k => {}
-                            last => {
-                                return Verdict::Silent(format!(
-                                    "{} at step {k} but the last stored step is {last:?}",
-                                    kind(e)
-                                ))
-                            }
-                        }
-                    }
-                    Verdict::Typed(kind(e))
-                }
-            }
+            judge_end(traj, out.error.as_ref(), *t0, h)
         }
     }
 }

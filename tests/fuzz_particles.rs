@@ -40,7 +40,9 @@
 
 use geoshake_testkit as common;
 
-use common::fuzz::{assert_clean, env_u64, fuzz_cases, hostile, step_error_kind, Verdict};
+use common::fuzz::{
+    assert_clean, env_u64, fuzz_cases, hostile, judge_end, step_error_kind, Verdict,
+};
 use geoshake::runtime::particles::{
     stencils::Distance, ConstraintForces, Langevin, Method, Options, ParticleState, ParticleSystem,
     Rattle, SolverChoice, Table, TopologyError,
@@ -996,38 +998,7 @@ fn judge_run(
             ));
         }
     }
-    match &out.error {
-        None => {
-            if traj.is_empty() {
-                return Verdict::Silent("Ok with an empty trajectory".into());
-            }
-            Verdict::Ok
-        }
-        Some(e) => {
-            let k = e.step();
-            if let Some(te) = e.time() {
-                let t = t0 + k as f64 * h;
-                if !(te == t || (te.is_nan() && t.is_nan())) {
-                    return Verdict::Silent(format!(
-                        "{} at step {k} reports t = {te}, not t0 + k·h = {t}",
-                        step_error_kind(e)
-                    ));
-                }
-            }
-            if k >= 1 {
-                match traj.len().checked_sub(1).map(|i| traj.step(i)) {
-                    Some(last) if last + 1 == k => {}
-                    last => {
-                        return Verdict::Silent(format!(
-                            "{} at step {k} but the last stored step is {last:?}",
-                            step_error_kind(e)
-                        ))
-                    }
-                }
-            }
-            typed(e)
-        }
-    }
+    judge_end(traj, out.error.as_ref(), t0, h)
 }
 
 // ---------------------------------------------------------------------------

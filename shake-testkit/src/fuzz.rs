@@ -12,7 +12,7 @@
 //! - `SHAKE_FUZZ_PRINT_SILENT`: print every silent case, not one per class;
 //! - `SHAKE_FUZZ_PRINT_TYPED=Kind`: print every case refused with that kind.
 
-use geoshake::{SolveError, StepError};
+use geoshake::{SolveError, StepError, Trajectory};
 use proptest::strategy::{Strategy, ValueTree};
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use std::collections::BTreeMap;
@@ -259,6 +259,42 @@ pub fn hostile(normal: std::ops::Range<f64>) -> impl Strategy<Value = f64> {
         1 => (-320i32..309, any::<bool>())
             .prop_map(|(e, neg)| if neg { -(10f64.powi(e)) } else { 10f64.powi(e) }),
     ]
+}
+
+/// The end of a run under both suites' contract: `Ok` with a non-empty
+/// trajectory, or a typed error whose time is t0 + k·h for its step k (NaN
+/// when that is NaN) and, for k ≥ 1, whose step follows the last stored
+/// one (the partial trajectory ends at step k − 1). The stored states
+/// themselves are the caller's to judge.
+pub fn judge_end(traj: &Trajectory, error: Option<&StepError>, t0: f64, h: f64) -> Verdict {
+    let Some(e) = error else {
+        if traj.is_empty() {
+            return Verdict::Silent("Ok with an empty trajectory".into());
+        }
+        return Verdict::Ok;
+    };
+    let k = e.step();
+    if let Some(te) = e.time() {
+        let t = t0 + k as f64 * h;
+        if !(te == t || (te.is_nan() && t.is_nan())) {
+            return Verdict::Silent(format!(
+                "{} at step {k} reports t = {te}, not t0 + k·h = {t}",
+                step_error_kind(e)
+            ));
+        }
+    }
+    if k >= 1 {
+        match traj.len().checked_sub(1).map(|i| traj.step(i)) {
+            Some(last) if last + 1 == k => {}
+            last => {
+                return Verdict::Silent(format!(
+                    "{} at step {k} but the last stored step is {last:?}",
+                    step_error_kind(e)
+                ))
+            }
+        }
+    }
+    Verdict::Typed(step_error_kind(e))
 }
 
 /// The kind of a [`StepError`], for the counts (an error at a particle
