@@ -59,6 +59,10 @@ pub(crate) struct Guard {
     /// estimate made (m ≥ 2).
     inverse_prev: f64,
     estimated: f64,
+    /// Whether a starting state's N is also judged against the size of its
+    /// terms (`nondegenerate_at_start`); off only for an integrator whose
+    /// starts are states another integrator has just accepted.
+    pub(crate) judge_terms: bool,
 }
 
 impl Guard {
@@ -71,6 +75,7 @@ impl Guard {
             n_prev_valid: false,
             inverse_prev: f64::NAN,
             estimated: f64::NAN,
+            judge_terms: true,
         }
     }
 
@@ -457,7 +462,7 @@ impl Guard {
         step: u64,
         t: f64,
     ) -> Result<f64, StepError> {
-        if nd.inverse_norm.is_infinite() {
+        if nd.inverse_norm.is_infinite() || !self.judge_terms {
             return self.nondegenerate(nd, 0.0, stage, step, t);
         }
         let terms = nondegeneracy_terms(sys, q, p, ws);
