@@ -16,6 +16,13 @@ use crate::validate;
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// Π: moves z ∈ M along its fibre onto M^H (RATTLE's projection).
     ///
+    /// z must lie on M to [`Options::constraint_tolerance`](crate::Options::constraint_tolerance)
+    /// (else [`StepError::NotOnConstraint`]). A z that is within it but
+    /// not on M to round-off is first brought onto M, as
+    /// [`project_to_hidden`](Self::project_to_hidden) does: the result
+    /// lies on M and on M^H to round-off, or the call fails with a typed
+    /// error. A z on M to round-off moves by Π alone.
+    ///
     /// ```
     /// use geoshake_runtime::{Integrator, StormerVerlet, State, examples::Pendulum};
     /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
@@ -36,14 +43,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         )?;
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
-        project_hidden(
-            &self.system,
-            q,
-            p,
-            &mut self.steps.map.ws,
-            self.guard.newton(),
-        )?;
-        validate::finite("projected state", q, p)?;
+        self.onto_hidden(q, p, true)?;
         crate::guard::membership::on_constraint(&self.system, q, p, &mut self.steps.map.ws, tol)?;
         Ok(out)
     }
@@ -68,27 +68,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         validate::options(&self.guard.options)?;
         let mut out = z.clone();
         let (q, p) = (out.q.as_mut_slice(), out.p.as_mut_slice());
-        let opts = *self.guard.newton();
-        // Onto M, then Π along the fibre; Π keeps g = 0 only to the
-        // round-off of the fibre flow (it moves q too when g depends on p),
-        // so a state left above g's round-off goes round once more: each
-        // round starts closer, and three are more than round-off needs.
-        for _ in 0..3 {
-            if let Err(e) = project_constraint(&self.system, q, p, &mut self.steps.map.ws, &opts) {
-                // Gauss–Newton could not bring the point onto M: say how
-                // far it got, for which constraint, and why it stopped.
-                let cause = match e {
-                    StepError::NewtonNotConverged { source, .. } => Some(source),
-                    _ => None,
-                };
-                return Err(self.off_m(q, p, cause));
-            }
-            project_hidden(&self.system, q, p, &mut self.steps.map.ws, &opts)?;
-            validate::finite("projected state", q, p)?;
-            if g_at_roundoff(&self.system, q, p, &mut self.steps.map.ws) {
-                break;
-            }
-        }
+        self.onto_hidden(q, p, false)?;
         if self.system.constraint_count() > 0 {
             let tol = self.guard.options.constraint_tolerance;
             crate::guard::membership::on_constraint(
@@ -112,6 +92,35 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             )?;
         }
         Ok(out)
+    }
+
+    /// Onto M, then Π along the fibre, in place. Π keeps g = 0 only to the
+    /// round-off of the fibre flow (it moves q too when g depends on p), so
+    /// a state left above g's round-off goes round once more: each round
+    /// starts closer, and three are more than round-off needs. `on_m`: the
+    /// caller has checked that (q, p) is on M to the tolerance, and a state
+    /// on M to round-off skips the first projection onto M.
+    fn onto_hidden(&mut self, q: &mut [f64], p: &mut [f64], on_m: bool) -> Result<(), StepError> {
+        let opts = *self.guard.newton();
+        for round in 0..3 {
+            let ws = &mut self.steps.map.ws;
+            let skip_m = on_m && round == 0 && g_at_roundoff(&self.system, q, p, ws);
+            if !skip_m && let Err(e) = project_constraint(&self.system, q, p, ws, &opts) {
+                // Gauss–Newton could not bring the point onto M: say how
+                // far it got, for which constraint, and why it stopped.
+                let cause = match e {
+                    StepError::NewtonNotConverged { source, .. } => Some(source),
+                    _ => None,
+                };
+                return Err(self.off_m(q, p, cause));
+            }
+            project_hidden(&self.system, q, p, &mut self.steps.map.ws, &opts)?;
+            validate::finite("projected state", q, p)?;
+            if g_at_roundoff(&self.system, q, p, &mut self.steps.map.ws) {
+                break;
+            }
+        }
+        Ok(())
     }
 
     /// [`StepError::NotOnConstraint`] for initial data (q, p) known to be

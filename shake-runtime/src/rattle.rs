@@ -29,7 +29,7 @@ use crate::linalg::{
     band_lu_factor, inverse_norm1_estimate_from, lu_det, lu_factor, lu_solve, norm_inf, zero_short,
     Band, Singular,
 };
-use crate::newton::{Monitor, NewtonOptions, Verdict};
+use crate::newton::{Finish, Monitor, NewtonOptions, Polish, Verdict};
 use crate::shake::Workspace;
 use crate::system::ConstrainedSystem;
 use crate::SolveError;
@@ -68,6 +68,9 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
     let mut mon = Monitor::new(*opts);
     let mut converged = false;
     let (mut predicted, mut correction) = (0.0f64, 0.0f64);
+    // ‖σ‖∞ of the rounds before a polish restarted σ from 0.
+    let mut moved = 0.0f64;
+    let mut polish = Polish::new(2);
     loop {
         ws.z1.copy_from_slice(&ws.y);
         {
@@ -86,8 +89,28 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
                 },
             ));
         }
-        if converged || r == 0.0 {
+        if r == 0.0 {
             break;
+        }
+        if converged {
+            // Far along a fibre (|σ| of 10²–10³ after Newton went round a
+            // periodic one) the last update can be lost in the rounding of
+            // σ + Δσ with {g,H} still far above its round-off. A polish
+            // restarts σ from 0 at the iterate, where the update is not
+            // lost; it is undone if it does not lower the residual.
+            match polish.judge(r, || hidden_at_roundoff(sys, ws)) {
+                Finish::Done => break,
+                Finish::Undo => {
+                    ws.z1.copy_from_slice(&ws.y);
+                    sys.hidden_constraints(&ws.y[..d], &ws.y[d..], &mut ws.hidden);
+                    break;
+                }
+                Finish::Again => {
+                    ws.y.copy_from_slice(&ws.z1);
+                    moved += norm_inf(&ws.sigma);
+                    ws.sigma.fill(0.0);
+                }
+            }
         }
         if mon.exhausted() {
             return Err(StepError::from_solve(
@@ -140,10 +163,35 @@ pub(crate) fn project_hidden<S: ConstrainedSystem>(
     p.copy_from_slice(&ws.z1[d..]);
     Ok(ProjectionReport {
         iterations: mon.iterations,
-        displacement: norm_inf(&ws.sigma),
+        displacement: moved + norm_inf(&ws.sigma),
         predicted,
         correction,
     })
+}
+
+/// Whether every |{g_i,H}| at z1 (in `ws.hidden`) is within 16ε of the
+/// size of its terms, Σ_k |∂g_i/∂z_k| |(J∇H)_k| at z1 (ws.z1): what
+/// rounding those products leaves, the mark a polish aims at. (Stricter
+/// than [`hidden_roundoff`], the bound a result must meet: a polish that
+/// cannot reach it is undone, never an error. Evaluates g_z and ∇H at z1
+/// into `ws.g_z_1` and `ws.tv`, the sizes into `ws.g_size`.)
+fn hidden_at_roundoff<S: ConstrainedSystem>(sys: &S, ws: &mut Workspace) -> bool {
+    let (d, m) = (ws.d, ws.m);
+    let (q, p) = ws.z1.split_at(d);
+    sys.constraint_jacobian(q, p, &mut ws.g_z_1);
+    let (hq, hp) = ws.tv[..2 * d].split_at_mut(d);
+    sys.gradient(q, p, hq, hp);
+    ws.g_size.fill(0.0);
+    for &(i, k) in &ws.pattern {
+        // (J∇H)_k: H_p for a q-component, H_q for a p-component.
+        let jh = if k < d { hp[k] } else { hq[k - d] };
+        ws.g_size[i] += (ws.g_z_1[i + k * m] * jh).abs();
+    }
+    let hidden = &ws.hidden;
+    hidden
+        .iter()
+        .zip(&ws.g_size)
+        .all(|(r, s)| r.abs() <= 16.0 * f64::EPSILON * s)
 }
 
 /// The round-off level of {g,H} at z = (q, p): 1e-12 · (1 + |z|∞) ·

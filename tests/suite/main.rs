@@ -55,6 +55,7 @@ mod perf_alloc;
 mod perf_derivatives;
 mod reference_selftest;
 mod roundoff_nondegeneracy;
+mod roundoff_projection;
 mod run_lane;
 mod runtime_alloc;
 mod runtime_convergence;

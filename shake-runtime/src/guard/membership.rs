@@ -8,6 +8,7 @@ use crate::system::ConstrainedSystem;
 use crate::tolerance::{gradient_sizes, max_abs, worst_constraint};
 #[allow(unused_imports)] // (doc links)
 use crate::Options;
+use crate::SolveError;
 
 /// (q, p) lies on M to `tolerance`, relative to g's scale there
 /// ([`Options::constraint_tolerance`]), else [`StepError::NotOnConstraint`]
@@ -38,13 +39,16 @@ pub(crate) fn off_constraint<S: ConstrainedSystem>(
     tolerance: f64,
 ) -> Option<StepError> {
     let (residual, i, bound) = furthest_off(system, q, p, ws, tolerance);
-    (!(residual <= bound)).then(|| StepError::NotOnConstraint {
+    // A residual or bound that overflowed says nothing about M: ∞ ≤ ∞
+    // would let g = ∞ pass at a state of 10²⁰⁰.
+    let overflowed = !residual.is_finite() || !bound.is_finite();
+    (overflowed || !(residual <= bound)).then(|| StepError::NotOnConstraint {
         step: 0,
         t: 0.0,
         residual,
         tolerance: bound,
         constraint: system.constraint_name(i).to_string(),
-        cause: None,
+        cause: overflowed.then_some(SolveError::NonFinite { iterations: 0 }),
     })
 }
 

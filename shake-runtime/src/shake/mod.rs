@@ -65,7 +65,7 @@ use crate::compensated::kahan_add;
 use crate::error::{Stage, StepError};
 use crate::fibre::FibreFlow;
 use crate::linalg::{band_lu_factor, band_lu_solve, norm_inf, Band};
-use crate::newton::{Monitor, NewtonOptions, Verdict};
+use crate::newton::{Finish, Monitor, NewtonOptions, Polish, Verdict};
 use crate::system::ConstrainedSystem;
 use crate::SolveError;
 
@@ -134,7 +134,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
     let mut need_jacobian = true;
     let mut refreshes = 0;
     let mut prev_step = f64::INFINITY;
-    let (mut polish, mut polish_from, mut polishing) = (2, f64::INFINITY, false);
+    let mut polish = Polish::new(2);
     loop {
         let r = norm_inf(&ws.g);
         if !r.is_finite() || !ws.z1.iter().all(|x| x.is_finite()) {
@@ -155,19 +155,18 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
             // with a fresh Jacobian are spent; one that does not lower the
             // residual is undone. The guard refuses what is still above
             // the round-off bound.
-            if polishing && !(r < polish_from) {
-                keep_iterate(ws, false);
-                break;
+            match polish.judge(r, || residual_at_roundoff(sys, ws)) {
+                Finish::Done => break,
+                Finish::Undo => {
+                    keep_iterate(ws, false);
+                    break;
+                }
+                Finish::Again => {
+                    keep_iterate(ws, true);
+                    converged = false;
+                    need_jacobian = true;
+                }
             }
-            if polish == 0 || residual_at_roundoff(sys, ws) {
-                break;
-            }
-            keep_iterate(ws, true);
-            polish -= 1;
-            polish_from = r;
-            polishing = true;
-            converged = false;
-            need_jacobian = true;
         }
         if mon.exhausted() {
             return Err(StepError::from_solve(
@@ -234,7 +233,7 @@ pub(crate) fn shake_step<S: ConstrainedSystem, B: BaseMap>(
             // keeps that path; the Jacobian stays compressed.
             converged = mon.update(step, size) == Verdict::Converged;
             need_jacobian = true;
-            if step > 0.25 * prev_step && ws.groups < m && !polishing {
+            if step > 0.25 * prev_step && ws.groups < m && !polish.active() {
                 // Slow for Newton: the band missed O(h²) couplings.
                 refreshes = 2;
             }
