@@ -130,3 +130,37 @@ fn a_state_whose_g_overflows_is_not_on_m() {
         }
     }
 }
+
+/// Momentum-dependent constraints coisotropic on M only, with the
+/// parameter that shifts M to the ends of f64 (once a hang of every base
+/// map): M lies where p_y² overflows, so no state of M can be computed,
+/// and every base map must say so with a typed error within the deadline.
+#[test]
+fn an_extreme_parameter_ends_in_a_typed_error() {
+    use crate::oracle::MomentumDependent;
+    use geoshake::ImplicitMidpoint;
+    for c in [f64::MAX, -f64::MAX, 1e300, 1e160] {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let sys = MomentumDependent::new(c);
+            let z0 = State::from_slices(&[0.1, 0.2, 0.3], &[0.4, 0.5, 0.6]);
+            let oks = [
+                Integrator::new(sys, StormerVerlet, 0.1)
+                    .project_to_hidden(&z0)
+                    .is_ok(),
+                Integrator::new(sys, SymplecticEuler, 0.1)
+                    .project_to_hidden(&z0)
+                    .is_ok(),
+                Integrator::new(sys, ImplicitMidpoint, 0.1)
+                    .project_to_hidden(&z0)
+                    .is_ok(),
+            ];
+            tx.send(oks).unwrap();
+        });
+        // Each answer takes microseconds; the deadline is for a hang.
+        match rx.recv_timeout(std::time::Duration::from_secs(20)) {
+            Ok(oks) => assert_eq!(oks, [false; 3], "c = {c:e}: a state of M found"),
+            Err(_) => panic!("c = {c:e}: no answer within 20 s"),
+        }
+    }
+}
