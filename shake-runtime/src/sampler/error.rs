@@ -69,6 +69,20 @@ pub enum SamplerError {
         /// U(q) at its start.
         potential: f64,
     },
+    /// The draws do not fit in memory: chains × draws × (d positions and
+    /// the per-draw statistics) could not be allocated (or overflows the
+    /// address space), checked before any chain runs.
+    #[error("{chains} chains of {draws} draws of {dim} coordinates do not fit in memory ({} bytes)", sci(*.bytes))]
+    Storage {
+        /// Chains asked for.
+        chains: usize,
+        /// Draws per chain.
+        draws: usize,
+        /// d.
+        dim: usize,
+        /// The bytes they need (∞ when that overflows).
+        bytes: f64,
+    },
     /// The system is not of the form the sampler needs: holonomic
     /// constraints g(q) and H(q, p) = ½|p|² + U(q) (an identity mass: the
     /// momenta are drawn from N(0, I)).

@@ -272,6 +272,7 @@ where
         check_start(&mut probe, start(c), c)?;
     }
     check_identity_mass(system, start(0))?;
+    check_storage(options.chains, options.draws, d)?;
 
     let outputs: Vec<chain::ChainOutput> = (0..options.chains)
         .into_par_iter()
@@ -303,6 +304,35 @@ where
         samples.step_size.push(out.step_size);
     }
     Ok(samples)
+}
+
+/// The bytes of one draw besides its d positions: acceptance
+/// probability, energy, step count, the accepted flag and the rejection.
+const DRAW_STATS_BYTES: usize = 3 * 8 + 2 + 1;
+
+/// The draws must fit: their size is computed without overflow and the
+/// positions are reserved once (and given back) before any chain runs, so
+/// a request past memory is a typed error, not an abort in a chain.
+fn check_storage(chains: usize, draws: usize, dim: usize) -> Result<(), SamplerError> {
+    let values = chains.checked_mul(draws).and_then(|n| n.checked_mul(dim));
+    let bytes = chains
+        .checked_mul(draws)
+        .and_then(|n| n.checked_mul(dim.checked_mul(8)?.checked_add(DRAW_STATS_BYTES)?));
+    let fits = match (values, bytes) {
+        (Some(values), Some(bytes)) if bytes <= isize::MAX as usize => {
+            Vec::<f64>::new().try_reserve_exact(values).is_ok()
+        }
+        _ => false,
+    };
+    if fits {
+        return Ok(());
+    }
+    Err(SamplerError::Storage {
+        chains,
+        draws,
+        dim,
+        bytes: bytes.map_or(f64::INFINITY, |b| b as f64),
+    })
 }
 
 /// A start must be on M (the engine's test, with its tolerance) and have

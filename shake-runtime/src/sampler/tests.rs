@@ -283,3 +283,23 @@ fn forward_failures_are_not_counted_as_reverse() {
     }
     assert_eq!((counts.reverse, counts.jump, counts.newton), (0, 2, 1));
 }
+
+#[test]
+fn draws_past_memory_are_a_typed_error_before_any_chain_runs() {
+    // usize::MAX draws overflows the byte count; 2⁴⁰ draws of 2
+    // coordinates (16 TiB) fits the address space but not the memory.
+    for draws in [usize::MAX, 1 << 40] {
+        let opts = SamplerOptions { draws, ..small(1) };
+        match sample(&circle(), &[[1.0, 0.0]], &opts) {
+            Err(SamplerError::Storage {
+                chains: 2,
+                dim: 2,
+                bytes,
+                ..
+            }) => {
+                assert!(bytes >= 2.0 * draws as f64 * 16.0, "{bytes:e}");
+            }
+            other => panic!("draws = {draws}: {other:?}"),
+        }
+    }
+}
