@@ -6,6 +6,7 @@
 
 mod bonds;
 mod models;
+mod sampler;
 
 use geoshake::declared::{DeclareError, DeclaredSystem};
 use geoshake::{
@@ -205,7 +206,7 @@ impl System {
 impl System {
     fn split(&self, z: &Bound<'_, PyAny>) -> PyResult<(Vec<f64>, Vec<f64>)> {
         let d = self.dof();
-        let (z, _) = real_array(z, "z", 1, 2 * d)?;
+        let (z, _) = real_array(z, "z", 1, 2 * d, Z)?;
         Ok((z[..d].to_vec(), z[d..].to_vec()))
     }
 }
@@ -564,9 +565,12 @@ fn plan(
     })
 }
 
+/// A state's layout, for [`real_array`]'s messages.
+const Z: &str = "q then p, 2d";
+
 /// `obj` as real numbers in a float64 array of `ndim` dimensions, the last
-/// of length `len` (2d: q then p), flattened row by row, with its number of
-/// rows. Anything NumPy reads as an array is taken (lists, integer arrays,
+/// of length `len` (`what` says which: "q then p, 2d" or "q, d"),
+/// flattened row by row, with its number of rows. Anything NumPy reads as an array is taken (lists, integer arrays,
 /// float32, big-endian, non-contiguous: converted); complex, boolean,
 /// object or string data, or a wrong shape, is an `InvalidInputError` that
 /// says what was expected and what was given.
@@ -575,13 +579,14 @@ fn real_array(
     name: &str,
     ndim: usize,
     len: usize,
+    what: &str,
 ) -> PyResult<(Vec<f64>, usize)> {
     let np = obj.py().import("numpy")?;
     // (A ragged list or an object NumPy cannot read raises ValueError or
     // TypeError there: the package's own error instead.)
     let a = np.call_method1("asarray", (obj,)).map_err(|e| {
         InvalidInputError::new_err(format!(
-            "{name} must be an array of real numbers (q then p, 2d = {len}): {}",
+            "{name} must be an array of real numbers ({what} = {len}): {}",
             e.value(obj.py())
         ))
     })?;
@@ -596,7 +601,7 @@ fn real_array(
     if !matches!(kind.as_str(), "f" | "i" | "u") {
         return Err(InvalidInputError::new_err(format!(
             "{name} must hold real numbers (float64; integers are converted), not dtype {}: \
-             an array of shape {want}, q then p",
+             an array of shape {want}, {what} = {len}",
             dtype.str()?
         )));
     }
@@ -604,7 +609,7 @@ fn real_array(
         let given: Vec<String> = shape.iter().map(usize::to_string).collect();
         let comma = if shape.len() == 1 { "," } else { "" };
         return Err(InvalidInputError::new_err(format!(
-            "{name} must have shape {want} (q then p, 2d = {len}), not ({}{comma})",
+            "{name} must have shape {want} ({what} = {len}), not ({}{comma})",
             given.join(", ")
         )));
     }
@@ -668,7 +673,7 @@ fn run(
         newton_tolerance,
         max_iterations,
     )?;
-    let (z0, _) = real_array(z0, "z0", 1, 2 * system.dof())?;
+    let (z0, _) = real_array(z0, "z0", 1, 2 * system.dof(), Z)?;
     let z0 = rows(system, &z0, 1)?;
     let (d, m) = (system.dof(), system.constraint_count());
     let mut outs = py.detach(|| run_all(&system.model, base, &plan, &z0));
@@ -725,7 +730,7 @@ fn ensemble(
             "errors must be \"raise\" or \"return\", not {errors:?}"
         )));
     }
-    let (flat, k) = real_array(z0s, "z0s", 2, 2 * system.dof())?;
+    let (flat, k) = real_array(z0s, "z0s", 2, 2 * system.dof(), Z)?;
     let z0s = rows(system, &flat, k)?;
     let (d, m) = (system.dof(), system.constraint_count());
     let outs = py.detach(|| run_all(&system.model, base, &plan, &z0s));
@@ -758,6 +763,7 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(model_names, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(ensemble, m)?)?;
+    m.add_function(wrap_pyfunction!(sampler::sample, m)?)?;
     m.add("ShakeError", py.get_type::<ShakeError>())?;
     m.add("DeclarationError", py.get_type::<DeclarationError>())?;
     m.add("ParameterError", py.get_type::<ParameterError>())?;

@@ -19,6 +19,10 @@ from :mod:`geoshake.models`, and integrate it::
     out.trajectory   # (1001, 4): q then p
     out.lambda_      # (1001, 1): the multipliers
 
+Constrained Hamiltonian Monte Carlo on M for a system H = |p|²/2 + U(q)
+with holonomic constraints: ``geoshake.sample(system, q0, chains=4,
+draws=1000)`` returns the draws as arrays of shape (chains, draws, d).
+
 Every failure is a subclass of :class:`ShakeError`; a failed run's error
 carries ``step``, ``time``, ``residual`` and the partial trajectory.
 """
@@ -40,6 +44,7 @@ from ._geoshake import (
     declare,
     ensemble,
     run,
+    sample,
 )
 from . import models
 
@@ -62,6 +67,7 @@ __all__ = [
     "models",
     "rattle",
     "run",
+    "sample",
     "shake",
 ]
 

@@ -15,6 +15,7 @@ from ._geoshake import (
     declare as declare,
     ensemble as ensemble,
     run as run,
+    sample as sample,
 )
 from . import models as models
 import numpy as np

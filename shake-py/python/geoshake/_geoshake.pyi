@@ -1,6 +1,6 @@
 """Type stubs of the Rust extension ``geoshake._geoshake``."""
 
-from typing import Literal, Optional, Union
+from typing import Any, Literal, Optional, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -129,3 +129,18 @@ def ensemble(
     max_iterations: Optional[int] = None,
     errors: Literal["raise", "return"] = "raise",
 ) -> list[Union[Result, ShakeError]]: ...
+
+def sample(
+    system: System,
+    q0: npt.ArrayLike,
+    *,
+    chains: int = 4,
+    draws: int = 1000,
+    warmup: int = 1000,
+    steps: int = 10,
+    step_size: float = 0.1,
+    target_acceptance: Optional[float] = 0.8,
+    step_size_jitter: float = 0.0,
+    reverse_tolerance: float = 1e-8,
+    seed: int = 0,
+) -> dict[str, npt.NDArray[Any]]: ...

@@ -1,0 +1,141 @@
+"""geoshake.sample: constrained HMC on string-declared targets with known
+answers, its determinism and its refusals.
+
+Each known-answer check is |estimate − exact| ≤ 4.5 Monte Carlo standard
+errors (the sampler's own MCSE from the bulk ESS): a false failure has
+probability ≈ 7e-6 per check for a Gaussian error, and the seeds are fixed,
+so a run is deterministic.
+"""
+
+import numpy as np
+import pytest
+
+import geoshake
+
+SPHERE = """
+struct Sphere {
+    parameters { kappa }
+    dof q[3], p[3];
+    hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2) / 2 - kappa * q[2];
+    constraints { sphere: q[0]^2 + q[1]^2 + q[2]^2 - 1 }
+}"""
+
+GATE = 4.5
+
+
+def mcse(x):
+    """The MCSE of the mean of x (chains, draws) from the sampler's ESS of
+    the same statistic, computed by batch means over each chain."""
+    chains, draws = x.shape
+    batches = 20
+    means = x[:, : draws - draws % batches].reshape(chains, batches, -1).mean(axis=2)
+    return means.std(ddof=1) / np.sqrt(means.size)
+
+
+def test_uniform_on_the_sphere_has_its_moments():
+    sphere = geoshake.declare(SPHERE, kappa=0.0)
+    s = geoshake.sample(sphere, [0.0, 0.0, 1.0], chains=4, draws=2000, warmup=500, seed=11)
+    q = s["positions"]
+    assert q.shape == (4, 2000, 3)
+    # Every draw on the sphere to round-off.
+    assert np.abs(np.linalg.norm(q, axis=2) - 1.0).max() <= 1e-13
+    for k in range(3):
+        x2, x4 = q[:, :, k] ** 2, q[:, :, k] ** 4
+        assert abs(x2.mean() - 1 / 3) <= GATE * mcse(x2), (k, x2.mean())
+        assert abs(x4.mean() - 1 / 5) <= GATE * mcse(x4), (k, x4.mean())
+    assert s["rhat"].max() < 1.01
+    assert (s["ess_bulk"] > 1000).all()
+
+
+def test_von_mises_fisher_has_its_mean_resultant_length():
+    # π ∝ e^{κ x₃} on S²: E[x₃] = coth κ − 1/κ.
+    kappa = 2.0
+    sphere = geoshake.declare(SPHERE, kappa=kappa)
+    s = geoshake.sample(sphere, [1.0, 0.0, 0.0], chains=4, draws=2000, warmup=500, seed=5)
+    x3 = s["positions"][:, :, 2]
+    exact = 1 / np.tanh(kappa) - 1 / kappa
+    assert abs(x3.mean() - exact) <= GATE * mcse(x3), (x3.mean(), exact)
+    # The sampler's own estimate and MCSE agree with the batch means.
+    assert abs(s["mean"][2] - x3.mean()) <= 1e-12
+    assert abs(x3.mean() - exact) <= GATE * s["mcse"][2]
+
+
+def test_the_output_is_what_arviz_reads():
+    s = geoshake.sample(
+        geoshake.declare(SPHERE, kappa=1.0), [0.0, 0.0, 1.0], chains=2, draws=50, warmup=20
+    )
+    for key, dtype in [
+        ("accepted", np.bool_),
+        ("acceptance_probability", np.float64),
+        ("energy", np.float64),
+        ("steps", np.uint64),
+    ]:
+        assert s[key].shape == (2, 50) and s[key].dtype == dtype, key
+    assert s["rejection"].shape == (2, 50)
+    # "" exactly where the proposal was accepted, a kind's name elsewhere.
+    assert ((s["rejection"] == "") == s["accepted"]).all()
+    names = {"", "metropolis", "reverse", "newton", "non_finite", "degenerate", "jump"}
+    assert set(np.unique(s["rejection"])) <= names
+    assert s["step_size"].shape == (2,)
+    for key in ["mean", "mcse", "rhat", "ess_bulk", "ess_tail"]:
+        assert s[key].shape == (3,), key
+
+
+def test_a_chain_depends_on_the_seed_and_its_index_only():
+    sphere = geoshake.declare(SPHERE, kappa=1.0)
+    kw = dict(draws=100, warmup=50, seed=3)
+    two = geoshake.sample(sphere, [0.0, 0.0, 1.0], chains=2, **kw)
+    four = geoshake.sample(sphere, [0.0, 0.0, 1.0], chains=4, **kw)
+    again = geoshake.sample(sphere, [0.0, 0.0, 1.0], chains=2, **kw)
+    assert np.array_equal(two["positions"], four["positions"][:2])
+    assert np.array_equal(two["positions"], again["positions"])
+    other = geoshake.sample(sphere, [0.0, 0.0, 1.0], chains=2, draws=100, warmup=50, seed=4)
+    assert not np.array_equal(two["positions"], other["positions"])
+
+
+def test_one_start_per_chain():
+    sphere = geoshake.declare(SPHERE, kappa=0.0)
+    starts = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    s = geoshake.sample(sphere, starts, chains=2, draws=10, warmup=0, target_acceptance=None)
+    assert s["positions"].shape == (2, 10, 3)
+    assert np.array_equal(s["step_size"], [0.1, 0.1])
+
+
+@pytest.mark.parametrize(
+    "q0, kw, error, says",
+    [
+        ([0.0, 0.0, 2.0], {}, geoshake.NotOnConstraintError, "chain 0 is not on M"),
+        ([0.0, 0.0, np.nan], {}, geoshake.ShakeError, "chain 0"),
+        ([0.0, 1.0], {}, geoshake.InvalidInputError, "shape (3,)"),
+        ([[0.0, 0.0, 1.0]] * 3, {"chains": 2}, geoshake.InvalidInputError, "3 starting points"),
+        ([0.0, 0.0, 1.0], {"chains": 0}, geoshake.InvalidInputError, "chains"),
+        ([0.0, 0.0, 1.0], {"step_size": -1.0}, geoshake.InvalidInputError, "step_size"),
+        ([0.0, 0.0, 1.0], {"target_acceptance": 1.5}, geoshake.InvalidInputError, "target"),
+        ([0.0, 0.0, 1.0], {"draws": 2**62}, geoshake.InvalidInputError, "do not fit in memory"),
+    ],
+)
+def test_bad_input_is_refused_with_the_package_errors(q0, kw, error, says):
+    sphere = geoshake.declare(SPHERE, kappa=0.0)
+    with pytest.raises(error, match=None) as e:
+        geoshake.sample(sphere, q0, **{"warmup": 10, "draws": 10, **kw})
+    assert says in str(e.value), str(e.value)
+
+
+def test_a_system_the_sampler_cannot_take_is_refused():
+    # The Hopf constraint reads p: not holonomic.
+    hopf = geoshake.models.HopfGravity(g0=0.0, g1=-1.0, radius2=1.0)
+    with pytest.raises(geoshake.InvalidInputError, match="holonomic"):
+        geoshake.sample(hopf, [1.0, 0.0], draws=10, warmup=10)
+
+
+def test_a_step_size_that_fails_every_proposal_says_so():
+    # h = 10 on the unit sphere with a strong field: proposals are rejected
+    # (counted by kind), the chain stays where it started, nothing raises.
+    sphere = geoshake.declare(SPHERE, kappa=50.0)
+    s = geoshake.sample(
+        sphere, [0.0, 0.0, 1.0], chains=1, draws=50, warmup=0, step_size=10.0,
+        target_acceptance=None, steps=5,
+    )
+    rejected = ~s["accepted"]
+    assert rejected.mean() > 0.9, rejected.mean()
+    assert np.isfinite(s["positions"]).all()
