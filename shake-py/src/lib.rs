@@ -764,6 +764,8 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(ensemble, m)?)?;
     m.add_function(wrap_pyfunction!(sampler::sample, m)?)?;
+    m.add_function(wrap_pyfunction!(sampler::ess_bulk, m)?)?;
+    m.add_function(wrap_pyfunction!(sampler::rhat, m)?)?;
     m.add("ShakeError", py.get_type::<ShakeError>())?;
     m.add("DeclarationError", py.get_type::<DeclarationError>())?;
     m.add("ParameterError", py.get_type::<ParameterError>())?;

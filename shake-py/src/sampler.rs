@@ -135,3 +135,39 @@ fn arrays<'py>(py: Python<'py>, s: &Samples) -> PyResult<Bound<'py, PyDict>> {
     out.set_item("ess_tail", column(|e| e.ess_tail))?;
     Ok(out)
 }
+
+/// `x` as (chains, draws) rows of a float64 array.
+fn chains_of(x: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<f64>>> {
+    let shape: Vec<usize> = x
+        .py()
+        .import("numpy")?
+        .call_method1("shape", (x,))
+        .and_then(|s| s.extract())
+        .map_err(|e| InvalidInputError::new_err(format!("x must be an array: {e}")))?;
+    if shape.len() != 2 {
+        return Err(InvalidInputError::new_err(format!(
+            "x must have shape (chains, draws), not {shape:?}"
+        )));
+    }
+    let (flat, rows) = real_array(x, "x", 2, shape[1], "draws")?;
+    Ok(flat
+        .chunks(shape[1].max(1))
+        .take(rows)
+        .map(<[f64]>::to_vec)
+        .collect())
+}
+
+/// The bulk effective sample size of a scalar quantity `x` of shape
+/// (chains, draws): rank-normalised split chains (Vehtari et al. 2021), the
+/// estimator `sample` reports. NaN for fewer than 4 draws per chain.
+#[pyfunction]
+pub(crate) fn ess_bulk(x: &Bound<'_, PyAny>) -> PyResult<f64> {
+    Ok(sampler::ess_bulk(&chains_of(x)?))
+}
+
+/// The rank-normalised split-R̂ of `x` of shape (chains, draws) (Vehtari et
+/// al. 2021), as `sample` reports it.
+#[pyfunction]
+pub(crate) fn rhat(x: &Bound<'_, PyAny>) -> PyResult<f64> {
+    Ok(sampler::rhat(&chains_of(x)?))
+}

@@ -139,3 +139,13 @@ def test_a_step_size_that_fails_every_proposal_says_so():
     rejected = ~s["accepted"]
     assert rejected.mean() > 0.9, rejected.mean()
     assert np.isfinite(s["positions"]).all()
+
+
+def test_ess_and_rhat_of_any_quantity_match_the_samplers_own():
+    s = geoshake.sample(geoshake.declare(SPHERE, kappa=1.0), [0.0, 0.0, 1.0], draws=200, warmup=50)
+    for k in range(3):
+        x = s["positions"][:, :, k]
+        assert geoshake.ess_bulk(x) == s["ess_bulk"][k]
+        assert geoshake.rhat(x) == s["rhat"][k]
+    with pytest.raises(geoshake.InvalidInputError, match="chains, draws"):
+        geoshake.ess_bulk(np.zeros(10))

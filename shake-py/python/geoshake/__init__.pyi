@@ -14,6 +14,8 @@ from ._geoshake import (
     System as System,
     declare as declare,
     ensemble as ensemble,
+    ess_bulk as ess_bulk,
+    rhat as rhat,
     run as run,
     sample as sample,
 )
