@@ -17,9 +17,10 @@
 //!   at the state returned: `tolerance::inverse_scale`), for RATTLE and
 //!   the projections the hidden constraint |∇g · M⁻¹p| within 4·√ε of
 //!   |∇g| times the larger of the member's velocity |M⁻¹p| returned and
-//!   the one given (the limit `tolerance::HIDDEN_LIMIT` puts on the exact
-//!   solve of N, with the velocity it started from as its scale; momenta
-//!   near the subnormal range are not judged), and every time t0 + k·h;
+//!   the one given, or for a step the one its velocity stage started from
+//!   (the limit `tolerance::HIDDEN_LIMIT` puts on the exact solve of N,
+//!   with the velocity it started from as its scale; momenta near the
+//!   subnormal range are not judged), and every time t0 + k·h;
 //! - a typed error (`TopologyError` when the system is declared,
 //!   `StepError` after) with a consistent partial trajectory: an error at
 //!   step k carries t0 + k·h and the last stored state is step k − 1;
@@ -669,8 +670,18 @@ fn p_before_velocity_stage(case: &Case, b: &Built, q0: &[f64], q1: &[f64]) -> Ve
         .collect()
 }
 
-/// [`off_hidden`] against the larger of two starting velocities: the
-/// state's before the call, and p′ of a step from `q0`.
+/// [`off_hidden`] against the larger of the starting velocities: the
+/// state's before the call, p′ of a step from `q0` rebuilt from the
+/// positions, and, when those do not hold it, p′ rebuilt from the step's
+/// multipliers (`p_prime`, asked for only then).
+///
+/// M (q1 − q0) / h loses p′ wherever a particle's displacement h M⁻¹p′ is
+/// below the rounding of its position (a hydrogen of 1e45 moves 1e-43 in a
+/// step, q1 = q0 in f64) or M (q1 − q0) overflows (a mass of f64::MAX): the
+/// rebuilt scale is then the velocity before the step, and a projection
+/// that cancelled a velocity the position stage had just given (a bond of
+/// a corrupted length pulled in at the first step) read as 1 where the
+/// solver's contract, relative to the velocity it started from, holds.
 fn off_hidden_after_step(
     case: &Case,
     b: &Built,
@@ -678,14 +689,81 @@ fn off_hidden_after_step(
     q: &[f64],
     p: &[f64],
     p_in: &[f64],
+    p_prime: impl FnOnce() -> Option<Vec<f64>>,
 ) -> Option<String> {
     let why = off_hidden(b, q, p, p_in)?;
     let p1 = p_before_velocity_stage(case, b, q0, q);
-    if p1.len() == p.len() && finite(&p1) {
-        off_hidden(b, q, p, &p1)
+    let why = if p1.len() == p.len() && finite(&p1) {
+        off_hidden(b, q, p, &p1)?
     } else {
-        Some(why)
+        why
+    };
+    match p_prime() {
+        Some(p1) if p1.len() == p.len() && finite(&p1) => off_hidden(b, q, p, &p1),
+        _ => Some(why),
     }
+}
+
+/// p′ = p0 − (h/2) ∇V(q0) + (h/2) f_c − (h/2) ∇V(q1) of the step from
+/// `before` that made `z` (the last state `rattle` made), from its
+/// constraint forces f_c = −G(q0)ᵀ Λ: the momenta its velocity stage
+/// started from, whatever the positions can show of them. `None` where the
+/// solver has no multipliers for `z` (a thermostat) or they overflow.
+fn p_prime_from_multipliers(
+    case: &Case,
+    b: &Built,
+    rattle: &Rattle,
+    before: &ParticleState,
+    z: &ParticleState,
+) -> Option<Vec<f64>> {
+    let mut fc = ConstraintForces::new(rattle.system());
+    rattle.constraint_forces(z, &mut fc).ok()?;
+    let (d, h, g) = (b.dim, case.h, case.field.unwrap_or(0.0));
+    let p0 = before.p();
+    (p0.len() == fc.forces.len() && b.masses.len() * d == p0.len()).then_some(())?;
+    Some(
+        (0..p0.len())
+            .map(|i| {
+                let kick = if i % d == d - 1 {
+                    h * g * b.masses[i / d]
+                } else {
+                    0.0
+                };
+                p0[i] + 0.5 * h * fc.forces[i] - kick
+            })
+            .collect(),
+    )
+}
+
+/// p′ of step `k` of a run from `start` whose state at step k is (q, p):
+/// the steps replayed one by one on a new solver, which must reach the
+/// same state bit for bit (`None` if not, or with a thermostat); from the
+/// multipliers ([`p_prime_from_multipliers`]), or where Λ = 2ν/h²
+/// overflows (h of 1e-251) from the positions of step k − 1, which a run
+/// stored with a stride does not hold.
+fn replay_p_prime(
+    case: &Case,
+    b: &Built,
+    start: &ParticleState,
+    k: u64,
+    (q, p): (&[f64], &[f64]),
+) -> Option<Vec<f64>> {
+    if case.thermostat.is_some() || k <= start.step() {
+        return None;
+    }
+    let mut rattle = Rattle::new(system(case, b).ok()?, case.h, case.options).ok()?;
+    let mut z = start.clone();
+    while z.step() + 1 < k {
+        rattle.step(&mut z).ok()?;
+    }
+    let before = z.clone();
+    rattle.step(&mut z).ok()?;
+    let bits = |x: &[f64], y: &[f64]| {
+        x.len() == y.len() && x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits())
+    };
+    (bits(z.q(), q) && bits(z.p(), p)).then_some(())?;
+    p_prime_from_multipliers(case, b, &rattle, &before, &z)
+        .or_else(|| Some(p_before_velocity_stage(case, b, before.q(), z.q())))
 }
 
 fn hidden_applies(case: &Case) -> bool {
@@ -693,18 +771,22 @@ fn hidden_applies(case: &Case) -> bool {
 }
 
 /// A state a step returned: finite, on M, on M^H for RATTLE, at t0 + k·h.
+/// `p_prime`: p′ of the step that made `z` from the solver's multipliers
+/// ([`off_hidden_after_step`]).
 fn judge_state(
     case: &Case,
     b: &Built,
     z: &ParticleState,
     before: &ParticleState,
     t0: f64,
+    p_prime: impl FnOnce() -> Option<Vec<f64>>,
 ) -> Verdict {
     if let Some(why) = off_m(b, case.options.tol, z.q()) {
         return Verdict::Silent(format!("Ok but {why}"));
     }
     if hidden_applies(case)
-        && let Some(why) = off_hidden_after_step(case, b, before.q(), z.q(), z.p(), before.p())
+        && let Some(why) =
+            off_hidden_after_step(case, b, before.q(), z.q(), z.p(), before.p(), p_prime)
     {
         return Verdict::Silent(format!("Ok but {why}"));
     }
@@ -774,7 +856,9 @@ fn run_case(case: &Case) -> Verdict {
                 let before = z.clone();
                 match rattle.step(&mut z) {
                     Ok(_) => {
-                        let v = judge_state(case, &b, &z, &before, 0.0);
+                        let v = judge_state(case, &b, &z, &before, 0.0, || {
+                            p_prime_from_multipliers(case, &b, &rattle, &before, &z)
+                        });
                         if !matches!(v, Verdict::Ok) {
                             return v;
                         }
@@ -818,7 +902,9 @@ fn run_case(case: &Case) -> Verdict {
                     if *steps == 0 {
                         return Verdict::Ok;
                     }
-                    judge_state(case, &b, &z, &before, 0.0)
+                    judge_state(case, &b, &z, &before, 0.0, || {
+                        replay_p_prime(case, &b, &before, z.step(), (z.q(), z.p()))
+                    })
                 }
                 Some(e) => {
                     // The state is the last good one: step k − 1.
@@ -830,7 +916,10 @@ fn run_case(case: &Case) -> Verdict {
                         ));
                     }
                     if z.step() > 0
-                        && let Verdict::Silent(why) = judge_state(case, &b, &z, &before, 0.0)
+                        && let Verdict::Silent(why) =
+                            judge_state(case, &b, &z, &before, 0.0, || {
+                                replay_p_prime(case, &b, &before, z.step(), (z.q(), z.p()))
+                            })
                     {
                         return Verdict::Silent(format!("run_in_place's last good state: {why}"));
                     }
@@ -895,7 +984,9 @@ fn run_case(case: &Case) -> Verdict {
             if let Err(e) = rattle.step(&mut z) {
                 return typed(&e);
             }
-            if let Verdict::Silent(why) = judge_state(case, &b, &z, &before, 0.0) {
+            if let Verdict::Silent(why) = judge_state(case, &b, &z, &before, 0.0, || {
+                p_prime_from_multipliers(case, &b, &rattle, &before, &z)
+            }) {
                 return Verdict::Silent(why);
             }
             let mut out = ConstraintForces::new(rattle.system());
@@ -982,7 +1073,8 @@ fn judge_run(
                     Some(j) if traj.step(j) + 1 == k => traj.state(j).q.as_slice().to_vec(),
                     _ => Vec::new(),
                 };
-                if let Some(why) = off_hidden_after_step(case, b, &q0, q, p, &p_in) {
+                let replay = || replay_p_prime(case, b, &z, k, (q, p));
+                if let Some(why) = off_hidden_after_step(case, b, &q0, q, p, &p_in, replay) {
                     return Verdict::Silent(format!("stored state {i} (step {k}) {why}"));
                 }
             }

@@ -290,18 +290,43 @@ pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
 /// (Σ_a |x_a − x̄|², or |x|² for one particle), or b = |M⁻¹p|² over its
 /// particles for the hidden constraint. A residual r is then judged by
 /// |r| · inverse_scale ≤ tol: r is never squared and the roots are taken
-/// apart, so the ratio stays right where g² or a·b would underflow (length
-/// scales down to ~1e-150; g² underflows below ~1e-154 and made a cluster
-/// "converge" at once). A zero scale gives 1/f64::MIN_POSITIVE, finite, so
-/// that a nonzero residual still fails; NaN stays NaN (and fails `<=`).
+/// apart, so the ratio stays right where a·b would underflow (length
+/// scales down to ~1e-150).
+///
+/// Below that, a or b is subnormal or zero: squares of the member's
+/// coordinates have underflowed, and so have the terms of g itself (for a
+/// distance, |r|² and ℓ² of a bond of 1e-160 are both 0, so g = 0 "holds"
+/// whatever r is), or the member is degenerate (a zero gradient,
+/// coincident particles: a bond of any length ℓ > 0 cannot hold there, yet
+/// its g = −ℓ² underflows to 0 for ℓ of 1e-300). Such a residual cannot be
+/// judged at all, and the scale is ∞: every residual then reads ∞, or NaN
+/// for a zero one, and fails `<=`, which the solvers report as a
+/// non-finite residual rather than return a state they cannot tell is on
+/// M. So does a factor that overflowed (a bond of 1e154: |r|² = 1e308 is
+/// finite, |∇g|² = 4|r|² is not, and 1/∞ = 0 made every residual read 0),
+/// and a NaN one.
 #[inline(always)]
 pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
+    let resolved = |x: f64| (f64::MIN_POSITIVE..f64::INFINITY).contains(&x);
+    if !(resolved(a) && resolved(b)) {
+        return f64::INFINITY;
+    }
     let ab = a * b;
     if ab.is_normal() {
         // (One root where the product is representable: the common case.)
         return 1.0 / ab.sqrt();
     }
-    1.0 / (a.sqrt() * b.sqrt()).max(f64::MIN_POSITIVE)
+    1.0 / (a.sqrt() * b.sqrt())
+}
+
+/// Whether a residual r replaces `worst` in a running maximum: r larger,
+/// or r NaN, and never once `worst` is NaN. `if !(r <= worst)` alone keeps
+/// a NaN only until the next member's finite residual replaces it (a bond
+/// whose |r|² overflowed to ∞ read NaN, and the member after it made the
+/// cluster "converge" at iteration 0); `f64::max` drops it at once.
+#[inline(always)]
+pub(crate) fn worse(r: f64, worst: f64) -> bool {
+    !(r <= worst) && !worst.is_nan()
 }
 
 /// |a · b| / (|a| · max(|b|, |b0|)): a hidden constraint ∇g · M⁻¹p

@@ -4,7 +4,8 @@
 //! found by `tests/fuzz_particles.rs`.
 
 use geoshake::runtime::particles::{
-    stencils::Distance, ConstraintForces, Options, ParticleState, ParticleSystem, Rattle, Table,
+    stencils::Distance, ConstraintForces, Options, ParticleState, ParticleSystem, Rattle,
+    SolverChoice, Table,
 };
 use geoshake::runtime::StepError;
 
@@ -57,5 +58,50 @@ fn a_potential_energy_that_overflows_is_a_typed_error() {
     match rattle.potential_energy(&z) {
         Ok(v) => assert!(v.is_finite(), "Ok({v})"),
         Err(e) => assert!(matches!(e, StepError::NonFinite { .. }), "{e}"),
+    }
+}
+
+/// A chain whose first bond is stretched to 1e200, so that its |r|²
+/// overflows and its residual reads NaN: the running maximum of the
+/// residuals (`if !(r <= worst)`) let the next, finite, member replace the
+/// NaN, and the clusters solver "converged" at iteration 0, returning the
+/// bond 1e200 long as `Ok` (a ring of 5 with momenta of 1e216, SHAKE, in
+/// the fuzz suite). A residual of NaN fails the whole cluster. Stretched
+/// to 1e154, |r|² = 1e308 is finite but |∇g|² = 4|r|² is not: the scale
+/// 1/∞ = 0 made the residual read 0 (the Python suite's `Bonds` with
+/// positions of 2e154). A scale that overflowed fails too.
+#[test]
+fn a_bond_whose_square_overflows_is_not_hidden_by_the_next_member() {
+    let chain = || {
+        let mut bonds = Table::new(2, 1);
+        bonds.push(&[0, 1], &[1.0]).unwrap();
+        bonds.push(&[1, 2], &[1.0]).unwrap();
+        ParticleSystem::new(3, vec![1.0, 2.0, 1.0])
+            .unwrap()
+            .with_constraints("bond", Distance::<3>, bonds)
+            .unwrap()
+    };
+    for solver in [
+        SolverChoice::Clusters,
+        SolverChoice::Band,
+        SolverChoice::Sparse,
+    ] {
+        let options = Options {
+            solver,
+            ..Options::default()
+        };
+        let mut rattle = Rattle::new(chain(), 0.1, options).unwrap();
+        for far in [1e154, 1e200] {
+            let q0 = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0];
+            let mut x = [-far, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0];
+            let given = x;
+            match rattle.shake_positions(&q0, &mut x) {
+                Ok(_) => panic!("{far:e} {solver:?}: Ok with x = {x:?}"),
+                Err(e) => {
+                    assert!(matches!(e, StepError::AtMember { .. }), "{solver:?}: {e}");
+                    assert_eq!(x, given);
+                }
+            }
+        }
     }
 }

@@ -297,3 +297,65 @@ fn a_shake_step_from_off_m_ends_on_m_or_fails() {
         }
     }
 }
+
+/// Below a length scale of ~1e-154 the squares in g = |r|² − l² and in
+/// the scale |∇g| · extent underflow: for bonds of 1e-300, g read 0 at any
+/// r, and `shake_positions` returned positions 0.3 % off as `Ok` (one
+/// bond 100 % off: the fuzz suite's bonds of 1e-161 … 5e-324). A residual
+/// that cannot be measured is a typed error, never a pass.
+#[test]
+fn bonds_below_the_range_of_their_squares_are_refused_not_passed() {
+    for l in [1e-161, 1e-300, f64::MIN_POSITIVE] {
+        let bonds = [(0, 1, l), (1, 2, l)];
+        for solver in SOLVERS {
+            let mut r = bonded(vec![1.0, 2.0, 1.0], &bonds, solver);
+            let q0 = vec![0.0, 0.0, 0.0, l, 0.0, 0.0, l, l, 0.0];
+            // The first bond 30 % long, the second 30 % short.
+            let mut x = vec![0.0, 0.0, 0.0, 1.3 * l, 0.0, 0.0, 1.3 * l, 0.7 * l, 0.0];
+            let given = x.clone();
+            match r.shake_positions(&q0, &mut x) {
+                Ok(_) => {
+                    let err = length_error(&x, &bonds);
+                    assert!(
+                        err <= 2.0 * TOL,
+                        "{l:e} {solver:?}: Ok, length error {err:e}"
+                    );
+                }
+                Err(e) => {
+                    assert!(matches!(e, StepError::AtMember { .. }), "{e}");
+                    assert_eq!(x, given, "{l:e} {solver:?}: x changed on error");
+                }
+            }
+        }
+    }
+}
+
+/// The velocity stage is linear in p, and is solved for p scaled to a
+/// largest entry near 1: momenta of 1e-283 on masses of 1e91 gave
+/// velocities M⁻¹p of 1e-374, 0 in f64, so the hidden constraint of the
+/// bond between the two heavy particles read as met whatever their
+/// velocities, and `project_momenta` returned it 15 % off its tangent.
+#[test]
+fn momenta_whose_velocities_underflow_are_projected_at_their_own_scale() {
+    let bonds = [(0, 1, 1.0), (1, 2, 1.0), (0, 2, 1.0)];
+    let masses = vec![17.0, 1e91, 1e91];
+    let q = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.5, 0.75f64.sqrt(), 0.0];
+    let p: Vec<f64> = (0..9)
+        .map(|k| ((k * 7 % 5) as f64 - 2.0) * 3e-284 + 1e-285)
+        .collect();
+    for solver in SOLVERS {
+        let mut r = bonded(masses.clone(), &bonds, solver);
+        let mut pm = p.clone();
+        if r.project_momenta(&q, &mut pm).is_ok() {
+            // Measured on p · 2⁹⁰⁰ (exact; the ratio does not depend on
+            // p's scale), where the velocities are representable.
+            let big: Vec<f64> = pm.iter().map(|x| x * 2f64.powi(900)).collect();
+            let z = ParticleState::new(q.clone(), big);
+            let hid = hidden_error(&z, &masses, &bonds);
+            assert!(
+                hid <= 4.0 * HIDDEN,
+                "{solver:?}: Ok with hidden residual {hid:e}"
+            );
+        }
+    }
+}

@@ -346,7 +346,7 @@ pub fn max_rel_length_error(table: &Table, dim: usize, q: &[f64]) -> f64 {
         }
         let l = table.data(k)[0];
         let e = ((s.sqrt() - l) / l).abs();
-        if !(e <= worst) {
+        if crate::tolerance::worse(e, worst) {
             worst = e;
         }
     }

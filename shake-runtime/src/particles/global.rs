@@ -23,6 +23,8 @@ pub(super) struct Global {
     pub(super) part: Vec<u32>,
     pub(super) grad0: Vec<f64>,
     pub(super) grad1: Vec<f64>,
+    /// 1 / (|∇g| · extent) of every member at q0 and at q1
+    /// (`tolerance::inverse_scale`).
     pub(super) scale0: Vec<f64>,
     pub(super) scale1: Vec<f64>,
     pub(super) g: Vec<f64>,
@@ -233,8 +235,10 @@ impl Global {
             for (c, (&g, &s)) in self.g.iter().zip(&self.scale0).enumerate() {
                 // |g| / scale, not g² / scale²: squares underflow at length
                 // scales below ~1e-77 and Newton would "converge" at once.
-                let r = g.abs() / s;
-                if !(r <= worst) {
+                // Below ~1e-150 the scale is ∞ (`inverse_scale`): not
+                // judged, a non-finite residual.
+                let r = g.abs() * s;
+                if crate::tolerance::worse(r, worst) {
                     worst = r;
                     worst_c = c;
                 }
@@ -356,7 +360,7 @@ impl Global {
     }
 
     /// `NotConverged` (stage SHAKE) at the worst member unless every
-    /// |g_k(q1)| / scale1_k ≤ tol; `g` and `scale1` hold q1's.
+    /// |g_k(q1)| · scale1_k ≤ tol; `g` and `scale1` hold q1's.
     fn judge_at_q1(
         &self,
         system: &ParticleSystem,
@@ -369,8 +373,8 @@ impl Global {
         let mut worst_g = 0.0f64;
         let mut worst_c = 0;
         for (c, (&g, &s)) in self.g.iter().zip(&self.scale1).enumerate() {
-            let r = g.abs() / s;
-            if !(r <= worst_g) {
+            let r = g.abs() * s;
+            if crate::tolerance::worse(r, worst_g) {
                 worst_g = r;
                 worst_c = c;
             }
@@ -408,7 +412,7 @@ impl Global {
                 ratio,
             );
             // (`f64::max` would drop a NaN: a non-finite residual must fail.)
-            if !(w <= worst) {
+            if crate::tolerance::worse(w, worst) {
                 worst = w;
             }
         }

@@ -688,6 +688,30 @@ impl Rattle {
         time: f64,
         report: &mut StepInfo,
     ) -> Result<(), StepError> {
+        // The projection is linear in p: it is solved for p scaled by a
+        // power of two (exact) to a largest entry near 1, so that the
+        // velocities M⁻¹p it solves with and judges by cannot underflow
+        // where p itself is representable (momenta of 1e-283 on masses of
+        // 1e91 read as velocities of 0, "on M^H" whatever their direction).
+        let scale = power_of_two_near(crate::tolerance::max_abs(&[], &self.pn));
+        if scale != 1.0 {
+            self.pn.iter_mut().for_each(|p| *p /= scale);
+        }
+        let r = self.velocity_stage_scaled(after_position_stage, k, time, report);
+        if scale != 1.0 {
+            self.pn.iter_mut().for_each(|p| *p *= scale);
+        }
+        r
+    }
+
+    /// [`velocity_stage`](Self::velocity_stage) on momenta already scaled.
+    fn velocity_stage_scaled(
+        &mut self,
+        after_position_stage: bool,
+        k: u64,
+        time: f64,
+        report: &mut StepInfo,
+    ) -> Result<(), StepError> {
         match &mut self.path {
             Path::Clusters { plans, .. } => {
                 let mut rep = ClusterReport::default();
@@ -717,4 +741,15 @@ impl Rattle {
             ),
         }
     }
+}
+
+/// 2^e with 2^e ≤ x < 2^(e+1) for a positive normal x, so that x / 2^e
+/// lies in [1, 2) and dividing or multiplying by it is exact; 1 for 0, a
+/// subnormal, ∞ or NaN (nothing to gain, or nothing to scale).
+fn power_of_two_near(x: f64) -> f64 {
+    if !x.is_normal() {
+        return 1.0;
+    }
+    // The exponent bits alone: the power of two at or below x.
+    f64::from_bits(x.to_bits() & 0x7ff0_0000_0000_0000)
 }

@@ -1,7 +1,7 @@
 //! A system of particles: masses, constraint families, potential families.
 
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
-use super::stencil::extent2;
+use super::stencil::member_scale;
 use super::{ForceField, Stencil, Table, TopologyError};
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
@@ -18,11 +18,13 @@ pub trait ConstraintFamily: ClusterKernel + Send + Sync {
     /// particles into `grad` (`arity * dim` entries per member, member after
     /// member, in the layout of [`Stencil`]).
     fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]);
-    /// As [`gradients`](Self::gradients), and the residual scale
-    /// |∇g_k| · extent_k of every member into `scale2` (extent² =
-    /// Σ_a |x_a − x̄|² over the member's particles, |x_a|² for one particle):
-    /// the relative residual of member k is |g_k| / scale2_k.
-    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]);
+    /// As [`gradients`](Self::gradients), and the reciprocal of the
+    /// residual scale, 1 / (|∇g_k| · extent_k), of every member into
+    /// `inv_scale` (extent² = Σ_a |x_a − x̄|² over the member's particles,
+    /// |x_a|² for one particle; `tolerance::inverse_scale`, the cluster
+    /// kernels' own): the relative residual of member k is
+    /// |g_k| · inv_scale_k.
+    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], inv_scale: &mut [f64]);
     /// out ← out − factor · W^w Gᵀ x over this family's members: every
     /// member k's gradient block (in `grad`, the layout of
     /// [`gradients`](Self::gradients)) times x_k, scaled by the particle's
@@ -241,7 +243,7 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
                 .gradient(x, self.table.data(k), &mut grad[k * w..(k + 1) * w]);
         }
     }
-    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], scale2: &mut [f64]) {
+    fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], inv_scale: &mut [f64]) {
         let w = S::ARITY * S::DIM;
         let mut x = [0.0; MAX_LOCAL];
         let x = &mut x[..w];
@@ -249,10 +251,7 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
             self.gather(q, k, x);
             let gr = &mut grad[k * w..(k + 1) * w];
             g[k] = self.stencil.gradient(x, self.table.data(k), gr);
-            // Each factor's square root separately: their product stays
-            // representable down to length scales of ~1e-150.
-            let n2: f64 = gr.iter().map(|v| v * v).sum();
-            scale2[k] = (n2.sqrt() * extent2::<S>(x).sqrt()).max(f64::MIN_POSITIVE);
+            inv_scale[k] = member_scale::<S>(gr, x).0;
         }
     }
     fn scatter(
@@ -334,7 +333,7 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
                 if !(r <= HIDDEN_LIMIT) {
                     r = relative_dot_after(gk, &v[..w], before[k]);
                 }
-                if !(r <= worst) {
+                if crate::tolerance::worse(r, worst) {
                     worst = r;
                 }
             } else {

@@ -213,7 +213,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             }
             gv[j] = g;
             let r = g.abs() * inv_s[j];
-            if !(r <= worst) {
+            if crate::tolerance::worse(r, worst) {
                 worst = r;
                 worst_j = j;
             }
@@ -237,7 +237,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
                     (inv_s[j], e2_s[j]) = member_scale::<S>(&gr[j][..wd], &xm[..wd]);
                     at_s[j] = xm;
                     let r = gv[j].abs() * inv_s[j];
-                    if !(r <= worst) {
+                    if crate::tolerance::worse(r, worst) {
                         (worst, worst_j) = (r, j);
                     }
                 }
@@ -371,7 +371,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
                 }
                 rel = relative_dot_after(&gr[j][..wd], &v[..wd], b0);
             }
-            if !(rel <= worst) {
+            if crate::tolerance::worse(rel, worst) {
                 worst = rel;
                 worst_j = j;
             }

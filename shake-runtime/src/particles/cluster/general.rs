@@ -123,7 +123,7 @@ impl Local {
             if !(rel <= HIDDEN_LIMIT) {
                 rel = relative_dot_after(gj, &v[..wd], before[j]);
             }
-            if !(rel <= worst) {
+            if crate::tolerance::worse(rel, worst) {
                 worst = rel;
             }
         }
@@ -265,7 +265,7 @@ pub(super) fn shake_one<S: Stencil>(
             };
             l.g[j] = g;
             let r = g.abs() * inv_s[j];
-            if !(r <= worst) {
+            if crate::tolerance::worse(r, worst) {
                 worst = r;
                 worst_j = j;
             }
