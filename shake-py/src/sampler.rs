@@ -3,6 +3,9 @@
 //! and the Metropolis test) for a declared or compiled system, with the
 //! draws as NumPy arrays of shape (chains, draws, d).
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
 use geoshake::runtime::sampler::{self, SamplerError, SamplerOptions, Samples};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::IntoPyArray;
@@ -33,11 +36,14 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// `q0` is one start (length d) for every chain, or one per chain (shape
 /// (chains, d)); each must lie on M. Each transition draws p ~ N(0, I) on
 /// the cotangent space, takes `steps` RATTLE steps of size `step_size`
-/// (adapted in warm-up towards `target_acceptance`, None keeps it), checks
+/// (adapted in warm-up towards `target_acceptance`, None keeps it, while
+/// holding proposals lost to failed solves to `target_failure_rate`), checks
 /// every step by stepping back (`reverse_tolerance`) and applies the
 /// Metropolis test. A failed solve or check rejects the proposal (counted
 /// by kind in `rejection`), never raises. Chains run in parallel with the
 /// GIL released; each chain's draws depend on `seed` and its index only.
+/// Ctrl-C stops every chain within a transition and raises
+/// KeyboardInterrupt.
 ///
 /// Returns a dict of NumPy arrays: `positions` (chains, draws, d),
 /// `accepted`, `acceptance_probability`, `energy`, `steps` (chains,
@@ -50,7 +56,7 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// conditioned on g(q) = 0, add ½ log det(g_q g_qᵀ) to U.
 #[pyfunction]
 #[pyo3(signature = (system, q0, *, chains=4, draws=1000, warmup=1000, steps=10, step_size=0.1,
-    target_acceptance=Some(0.8), step_size_jitter=0.0, reverse_tolerance=1e-8, seed=0))]
+    target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8, seed=0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample<'py>(
     py: Python<'py>,
@@ -62,6 +68,7 @@ pub(crate) fn sample<'py>(
     steps: usize,
     step_size: f64,
     target_acceptance: Option<f64>,
+    target_failure_rate: f64,
     step_size_jitter: f64,
     reverse_tolerance: f64,
     seed: u64,
@@ -83,11 +90,34 @@ pub(crate) fn sample<'py>(
         step_size,
         step_size_jitter,
         target_acceptance,
+        target_failure_rate,
         reverse_tolerance,
         seed,
     };
-    let samples = py
-        .detach(|| with_model!(&system.model, s => sampler::sample(s, &starts, &options)))
+    let stop = AtomicBool::new(false);
+    let (samples, interrupt) = std::thread::scope(|scope| {
+        let run = scope.spawn(
+            || with_model!(&system.model, s => sampler::sample_until(s, &starts, &options, &stop)),
+        );
+        // The chains run without the GIL; this thread takes it back every
+        // 50 ms to let Python see a signal, so that Ctrl-C stops the run.
+        let mut interrupt = None;
+        while !run.is_finished() {
+            if interrupt.is_none() {
+                if let Err(e) = py.check_signals() {
+                    stop.store(true, Ordering::Relaxed);
+                    interrupt = Some(e);
+                }
+            }
+            py.detach(|| std::thread::sleep(Duration::from_millis(50)));
+        }
+        (run.join(), interrupt)
+    });
+    if let Some(e) = interrupt {
+        return Err(e);
+    }
+    let samples = samples
+        .map_err(|_| InvalidInputError::new_err("the sampler's thread panicked"))?
         .map_err(|e| error(py, &e))?;
     arrays(py, &samples)
 }

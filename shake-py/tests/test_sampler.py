@@ -111,6 +111,7 @@ def test_one_start_per_chain():
         ([0.0, 0.0, 1.0], {"chains": 0}, geoshake.InvalidInputError, "chains"),
         ([0.0, 0.0, 1.0], {"step_size": -1.0}, geoshake.InvalidInputError, "step_size"),
         ([0.0, 0.0, 1.0], {"target_acceptance": 1.5}, geoshake.InvalidInputError, "target"),
+        ([0.0, 0.0, 1.0], {"target_failure_rate": 0.0}, geoshake.InvalidInputError, "failure"),
         ([0.0, 0.0, 1.0], {"draws": 2**62}, geoshake.InvalidInputError, "do not fit in memory"),
     ],
 )
@@ -149,3 +150,23 @@ def test_ess_and_rhat_of_any_quantity_match_the_samplers_own():
         assert geoshake.rhat(x) == s["rhat"][k]
     with pytest.raises(geoshake.InvalidInputError, match="chains, draws"):
         geoshake.ess_bulk(np.zeros(10))
+    # A NaN draw makes the ranks meaningless: NaN, never a number.
+    x = s["positions"][:, :, 0].copy()
+    x[1, 7] = np.nan
+    assert np.isnan(geoshake.ess_bulk(x)) and np.isnan(geoshake.rhat(x))
+
+
+def test_ctrl_c_stops_a_long_run():
+    # 10^12 warm-up transitions would take days; SIGINT half a second in
+    # must stop every chain and raise KeyboardInterrupt within a second.
+    import signal
+    import threading
+    import time
+
+    sphere = geoshake.declare(SPHERE, kappa=1.0)
+    timer = threading.Timer(0.5, lambda: signal.raise_signal(signal.SIGINT))
+    start = time.perf_counter()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        geoshake.sample(sphere, [0.0, 0.0, 1.0], draws=10, warmup=10**12)
+    assert time.perf_counter() - start < 5.0

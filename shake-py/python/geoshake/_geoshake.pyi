@@ -140,7 +140,8 @@ def sample(
     steps: int = 10,
     step_size: float = 0.1,
     target_acceptance: Optional[float] = 0.8,
-    step_size_jitter: float = 0.0,
+    target_failure_rate: float = 0.01,
+    step_size_jitter: float = 0.2,
     reverse_tolerance: float = 1e-8,
     seed: int = 0,
 ) -> dict[str, npt.NDArray[Any]]: ...

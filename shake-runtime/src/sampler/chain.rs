@@ -8,6 +8,8 @@
 //! step's result, never from its own last one, and so always checks its
 //! start afresh: one such check per step, whichever integrator pays it.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
@@ -19,7 +21,7 @@ use crate::system::ConstrainedSystem;
 
 use super::adapt::DualAveraging;
 use super::output::Rejection;
-use super::SamplerOptions;
+use super::{SamplerOptions, MAX_STEP_SIZE};
 
 /// What one transition did.
 #[derive(Copy, Clone, Debug)]
@@ -33,6 +35,13 @@ pub(crate) struct Transition {
     /// Forward steps taken.
     pub(crate) steps: usize,
     pub(crate) rejection: Option<Rejection>,
+}
+
+impl Transition {
+    /// Lost to a failed solve or check, not to the Metropolis test.
+    pub(crate) fn failed(&self) -> bool {
+        self.rejection.is_some_and(|r| r != Rejection::Metropolis)
+    }
 }
 
 /// The draws of one chain, in the layout of `Samples` (draw-major).
@@ -99,20 +108,48 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         }
     }
 
-    /// Warm-up (with dual averaging when asked), then the draws.
-    pub(crate) fn run(mut self, opts: &SamplerOptions) -> ChainOutput {
+    /// Warm-up (with dual averaging when asked), then the draws; None once
+    /// `stop` is set (checked before every transition).
+    ///
+    /// The adaptation first brings h within a factor 2 of the scale where
+    /// one step's acceptance crosses ½ ([`Chain::initial_step_size`]),
+    /// then runs two dual averagings side by side, each transition taking
+    /// the smaller of their step sizes: one drives the mean acceptance
+    /// statistic to its target, the other the fraction of proposals lost
+    /// to a failed solve or check to at most `target_failure_rate`. The
+    /// second matters wherever a step can be too long for M (a step of
+    /// length h|p| across a circle of radius r < h|p| has no solution):
+    /// those failures come where |p| is largest, at the crossings between
+    /// modes, and a step size tuned on acceptance alone (which counts them
+    /// only as rejections) keeps the chain on one side of M for thousands
+    /// of draws while every chain agrees, R̂ ≈ 1, on a wrong mean.
+    pub(crate) fn run(mut self, opts: &SamplerOptions, stop: &AtomicBool) -> Option<ChainOutput> {
+        let stopped = || stop.load(Ordering::Relaxed);
         let mut h = opts.step_size;
         if let Some(target) = opts.target_acceptance {
-            let mut da = DualAveraging::new(h, target);
-            for _ in 0..opts.warmup {
-                let t = self.transition(da.step_size());
-                da.update(t.alpha);
-            }
             if opts.warmup > 0 {
-                h = da.final_step_size();
+                let h0 = self.initial_step_size(h);
+                let mut acceptance = DualAveraging::new(h0, target);
+                let mut solved = DualAveraging::new(h0, 1.0 - opts.target_failure_rate);
+                for _ in 0..opts.warmup {
+                    if stopped() {
+                        return None;
+                    }
+                    let h = acceptance.step_size().min(solved.step_size());
+                    let t = self.transition(h.min(MAX_STEP_SIZE));
+                    acceptance.update(t.alpha);
+                    solved.update(if t.failed() { 0.0 } else { 1.0 });
+                }
+                h = acceptance
+                    .final_step_size()
+                    .min(solved.final_step_size())
+                    .min(MAX_STEP_SIZE);
             }
         } else {
             for _ in 0..opts.warmup {
+                if stopped() {
+                    return None;
+                }
                 self.transition(h);
             }
         }
@@ -120,14 +157,46 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         let mut positions = Vec::with_capacity(opts.draws * d);
         let mut transitions = Vec::with_capacity(opts.draws);
         for _ in 0..opts.draws {
+            if stopped() {
+                return None;
+            }
             transitions.push(self.transition(h));
             positions.extend_from_slice(self.current.q.as_slice());
         }
-        ChainOutput {
+        Some(ChainOutput {
             positions,
             transitions,
             step_size: h,
+        })
+    }
+
+    /// A starting step size for the adaptation (Hoffman and Gelman 2014,
+    /// Algorithm 4): from h, double (or halve) it while one RATTLE step
+    /// from the chain's position with a fresh momentum is accepted with
+    /// probability above (or below) ½, a failed solve or check counting
+    /// as 0 (each trial is a transition of one step, which the chain keeps
+    /// as it keeps any warm-up transition). The adaptation's μ = log(10 h₀) then sits near the scale of
+    /// M and of U, whatever the units of q: dual averaging from a step
+    /// 10¹⁰ too small would need far more than a warm-up to get there.
+    /// Kept within [2⁻¹⁰⁷⁴·h, 10⁶] (the bound on any step size), so it ends.
+    fn initial_step_size(&mut self, h: f64) -> f64 {
+        let steps = self.steps;
+        self.steps = 1;
+        let up = self.transition(h).alpha > 0.5;
+        let mut h = h;
+        for _ in 0..2200 {
+            let next = if up { 2.0 * h } else { 0.5 * h };
+            if !(next > 0.0 && next <= MAX_STEP_SIZE) {
+                break;
+            }
+            h = next;
+            let alpha = self.transition(h).alpha;
+            if (alpha > 0.5) != up {
+                break;
+            }
         }
+        self.steps = steps;
+        h
     }
 
     /// One transition of constrained HMC with step size h (jittered when

@@ -30,7 +30,8 @@
 //!
 //! Chains of unequal length are cut to the shortest. Fewer than four
 //! draws per chain (ten for an ESS: Geyer's sequence needs a pair of lags
-//! in each half), or chains that are all constant, give NaN.
+//! in each half), chains that are all constant, or a NaN among the draws
+//! (as ArviZ: ranks of NaN mean nothing) give NaN.
 
 /// The rank-normalised split-R̂ (Vehtari et al. 2021): near 1 when the
 /// chains agree, above 1.01 a sign that they have not mixed.
@@ -158,7 +159,11 @@ pub fn ess_tail<C: AsRef<[f64]>>(chains: &[C]) -> f64 {
 /// than four draws per chain (two per half) or no chain.
 fn split_chains<C: AsRef<[f64]>>(chains: &[C]) -> Option<Vec<Vec<f64>>> {
     let n = chains.iter().map(|c| c.as_ref().len()).min()?;
-    if n < 4 {
+    if n < 4
+        || chains
+            .iter()
+            .any(|c| c.as_ref()[..n].iter().any(|x| x.is_nan()))
+    {
         return None;
     }
     let half = n / 2;
@@ -558,6 +563,25 @@ mod tests {
             for (g, w) in got.iter().zip(want) {
                 assert!((g - w).abs() <= 1e-10 * w, "{got:?} vs ArviZ {want:?}");
             }
+        }
+    }
+
+    /// One NaN among 400 draws: every diagnostic is NaN, never a number
+    /// computed from ranks that the NaN made meaningless.
+    #[test]
+    fn a_nan_draw_gives_nan() {
+        let mut chains: Vec<Vec<f64>> = (0..4)
+            .map(|c| (0..100).map(|i| ((i * 7 + c * 13) % 17) as f64).collect())
+            .collect();
+        assert!(rhat(&chains).is_finite() && ess_bulk(&chains).is_finite());
+        chains[2][37] = f64::NAN;
+        for (name, v) in [
+            ("rhat", rhat(&chains)),
+            ("ess_bulk", ess_bulk(&chains)),
+            ("ess_mean", ess_mean(&chains)),
+            ("ess_tail", ess_tail(&chains)),
+        ] {
+            assert!(v.is_nan(), "{name} = {v}");
         }
     }
 }

@@ -83,6 +83,10 @@ pub enum SamplerError {
         /// The bytes they need (∞ when that overflows).
         bytes: f64,
     },
+    /// [`sample_until`](super::sample_until)'s `stop` was set before the
+    /// draws were complete.
+    #[error("the sampler was interrupted before its draws were complete")]
+    Interrupted,
     /// The system is not of the form the sampler needs: holonomic
     /// constraints g(q) and H(q, p) = ½|p|² + U(q) (an identity mass: the
     /// momenta are drawn from N(0, I)).

@@ -101,6 +101,8 @@ pub use convergence::{ess_bulk, ess_mean, ess_tail, rhat};
 pub use error::SamplerError;
 pub use output::{ChainSummary, Estimate, Rejection, RejectionCounts, Samples, Summary};
 
+use std::sync::atomic::AtomicBool;
+
 use rayon::prelude::*;
 
 use crate::base_map::StormerVerlet;
@@ -137,15 +139,27 @@ pub struct SamplerOptions {
     /// adaptation's log(10 h) and every step's t + h stay finite).
     pub step_size: f64,
     /// Each transition draws its step size uniformly from
-    /// h·[1 − j, 1 + j] with j this (default 0, in [0, 1)): a trajectory
+    /// h·[1 − j, 1 + j] with j this (default 0.2, in [0, 1)): a trajectory
     /// length L·h that matches a period of the dynamics (an oscillation
     /// about a mode) takes the chain back near its start, and a random
-    /// length breaks that resonance. A mixture of kernels that each keep
-    /// the target keeps it too.
+    /// length breaks that resonance (Neal 2011, Section 5.4.4). Without
+    /// it the von Mises density e^{20 cos θ} sampled with h = 0.31 and
+    /// L = 10 (two periods of the oscillation about its mode) gives
+    /// E[cos θ] = 0.989 instead of 0.975 while every chain agrees. A
+    /// mixture of kernels that each keep the target keeps it too.
     pub step_size_jitter: f64,
     /// The mean acceptance probability that warm-up adapts h to (default
     /// `Some(0.8)`); `None` keeps h.
     pub target_acceptance: Option<f64>,
+    /// The largest fraction of proposals that the adaptation lets a
+    /// failed solve or check reject (default 0.01, in (0, 1)): h is the
+    /// smaller of the step that meets `target_acceptance` and the step
+    /// that keeps these failures to this rate. Such failures cluster where
+    /// the momentum is largest, at the crossings between modes; a step
+    /// tuned on acceptance alone can lose most crossings and leave every
+    /// chain on one side, R̂ near 1 and the mean wrong. Used only when
+    /// `target_acceptance` is set.
+    pub target_failure_rate: f64,
     /// A step q₀ → q₁ is rejected when its step back misses q₀ by more
     /// than this times ‖q₁ − q₀‖∞ + 10⁻⁴·max(‖q₀‖∞, ‖q₁‖∞) (default 1e-8):
     /// positions only, as mici (RATTLE's momenta are functions of the two
@@ -169,8 +183,9 @@ impl Default for SamplerOptions {
             warmup: 1000,
             steps: 10,
             step_size: 0.1,
-            step_size_jitter: 0.0,
+            step_size_jitter: 0.2,
             target_acceptance: Some(0.8),
+            target_failure_rate: 0.01,
             reverse_tolerance: 1e-8,
             seed: 0,
         }
@@ -207,6 +222,13 @@ impl SamplerOptions {
             && !(t > 0.0 && t < 1.0)
         {
             return invalid("target_acceptance", t, "strictly between 0 and 1");
+        }
+        if !(self.target_failure_rate > 0.0 && self.target_failure_rate < 1.0) {
+            return invalid(
+                "target_failure_rate",
+                self.target_failure_rate,
+                "strictly between 0 and 1",
+            );
         }
         if !(self.reverse_tolerance > 0.0) {
             return invalid(
@@ -248,6 +270,34 @@ where
     S: ConstrainedSystem + Clone + Send + Sync,
     Q: AsRef<[f64]> + Sync,
 {
+    sample_until(system, starts, options, &AtomicBool::new(false))
+}
+
+/// [`sample`] that can be stopped from another thread: every chain ends at
+/// its next transition once `stop` is set, and the run returns
+/// [`SamplerError::Interrupted`] (a Ctrl-C in Python, a deadline, a
+/// user's cancel button). Chains do not share draws, so a partial run
+/// would be chains of unequal length: it is not returned.
+///
+/// ```
+/// use std::sync::atomic::AtomicBool;
+/// use geoshake_runtime::examples::Pendulum;
+/// use geoshake_runtime::sampler::{sample_until, SamplerError, SamplerOptions};
+/// let circle = Pendulum { gravity: 0.0, length: 1.0 };
+/// let stop = AtomicBool::new(true);
+/// let err = sample_until(&circle, &[[1.0, 0.0]], &SamplerOptions::default(), &stop);
+/// assert!(matches!(err, Err(SamplerError::Interrupted)));
+/// ```
+pub fn sample_until<S, Q>(
+    system: &S,
+    starts: &[Q],
+    options: &SamplerOptions,
+    stop: &AtomicBool,
+) -> Result<Samples, SamplerError>
+where
+    S: ConstrainedSystem + Clone + Send + Sync,
+    Q: AsRef<[f64]> + Sync,
+{
     options.validate()?;
     let d = system.dof();
     if starts.len() != 1 && starts.len() != options.chains {
@@ -274,10 +324,11 @@ where
     check_identity_mass(system, start(0))?;
     check_storage(options.chains, options.draws, d)?;
 
-    let outputs: Vec<chain::ChainOutput> = (0..options.chains)
+    let outputs: Option<Vec<chain::ChainOutput>> = (0..options.chains)
         .into_par_iter()
-        .map(|c| Chain::new(system, start(c), options.seed, c, options).run(options))
+        .map(|c| Chain::new(system, start(c), options.seed, c, options).run(options, stop))
         .collect();
+    let outputs = outputs.ok_or(SamplerError::Interrupted)?;
 
     let (chains, draws) = (options.chains, options.draws);
     let mut samples = Samples {

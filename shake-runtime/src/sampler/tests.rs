@@ -303,3 +303,124 @@ fn draws_past_memory_are_a_typed_error_before_any_chain_runs() {
         }
     }
 }
+
+/// E[−y] under the von Mises density ∝ e^{−κy} on the unit circle (the
+/// pendulum with gravity κ): I₁(κ)/I₀(κ), by the trapezoid rule in the
+/// angle (exponentially accurate for a smooth periodic integrand; 4096
+/// nodes are exact to round-off for κ ≤ 20).
+fn von_mises_mean(kappa: f64) -> f64 {
+    let n = 4096;
+    let (mut num, mut den) = (0.0, 0.0);
+    for k in 0..n {
+        let c = (2.0 * std::f64::consts::PI * k as f64 / n as f64).cos();
+        let w = (kappa * (c - 1.0)).exp();
+        num += c * w;
+        den += w;
+    }
+    num / den
+}
+
+/// |mean − exact| ≤ 4.5 MCSE: a false failure once in 1.5·10⁵ for a
+/// normal error, with the seed fixed so the test is deterministic.
+fn assert_mean(s: &Samples, exact: f64, what: &str) {
+    let est = Estimate::of(&s.series(|q| -q[1]));
+    assert!(
+        (est.mean - exact).abs() <= 4.5 * est.mcse,
+        "{what}: E[−y] = {} ± {} (MCSE), exact {exact}\n{}",
+        est.mean,
+        est.mcse,
+        s.summary()
+    );
+}
+
+/// κ = 2 with the defaults, from the mode and from the tail. A step can
+/// fail where h|p| exceeds the radius, which happens where |p| is largest:
+/// crossing the mode from the tail. Adapting h to the acceptance alone
+/// lost a quarter of the proposals to such failures and gave every chain
+/// E[−y] ≈ 0.78 for the exact 0.698 (R̂ = 1.001); holding the failures to
+/// `target_failure_rate` keeps the crossings (with it off: R̂ = 1.28 and a
+/// bulk ESS of 11 over these 20 000 draws).
+#[test]
+fn the_defaults_keep_the_crossings_between_mode_and_tail() {
+    let exact = von_mises_mean(2.0);
+    let opts = SamplerOptions {
+        draws: 5000,
+        seed: 123,
+        ..SamplerOptions::default()
+    };
+    let pendulum = Pendulum {
+        gravity: 2.0,
+        length: 1.0,
+    };
+    for start in [[0.0, -1.0], [0.0, 1.0]] {
+        let s = sample(&pendulum, &[start], &opts).unwrap();
+        let summary = s.summary();
+        // The gates of tests/suite/sampler.rs: chains that have mixed
+        // (an unmixed run has an MCSE too large for the mean to test).
+        assert!(
+            summary.max_rhat() < 1.05 && summary.min_ess_bulk() >= 400.0,
+            "start {start:?}\n{summary}"
+        );
+        assert_mean(&s, exact, &format!("start {start:?}"));
+        let failed = s.summary().rejected().by_checks() as f64 / s.accepted.len() as f64;
+        assert!(failed < 3.0 * opts.target_failure_rate, "{failed}");
+    }
+}
+
+/// κ = 20 at h = 0.31, L = 10: two periods of the oscillation about the
+/// mode, a resonance that sends each trajectory back near its start. With
+/// a fixed length E[−y] = 0.989 (exact 0.975, all chains agreeing); the
+/// default jitter of h breaks the resonance.
+#[test]
+fn the_default_jitter_breaks_a_resonance() {
+    let opts = SamplerOptions {
+        draws: 5000,
+        step_size: 0.31,
+        target_acceptance: None,
+        warmup: 200,
+        seed: 5,
+        ..SamplerOptions::default()
+    };
+    let s = sample(
+        &Pendulum {
+            gravity: 20.0,
+            length: 1.0,
+        },
+        &[[0.0, -1.0]],
+        &opts,
+    )
+    .unwrap();
+    assert_mean(&s, von_mises_mean(20.0), "jittered");
+}
+
+/// The uniform density on circles of radius 10⁴ and 10¹⁵⁰ from the default
+/// h₀ = 0.1. The initial search takes h to the circle's scale, so the
+/// first mixes in a default warm-up (dual averaging alone, from 0.1,
+/// reached h = 305 and a bulk ESS of 149 in these 8 000 draws); on the
+/// second every step size, adapted or not, stays within the documented
+/// bound 10⁶ (dual averaging alone reached 10²⁰), and the summary says
+/// the chains have not mixed.
+#[test]
+fn the_adaptation_finds_the_scale_of_m_within_the_bound() {
+    let opts = SamplerOptions {
+        draws: 2000,
+        seed: 9,
+        ..SamplerOptions::default()
+    };
+    let wide = Pendulum {
+        gravity: 0.0,
+        length: 1e4,
+    };
+    let s = sample(&wide, &[[1e4, 0.0]], &opts).unwrap();
+    let summary = s.summary();
+    assert!(s.step_size.iter().all(|&h| h > 1e3), "{summary}");
+    assert!(summary.warnings().is_empty(), "{summary}");
+    let huge = Pendulum {
+        gravity: 0.0,
+        length: 1e150,
+    };
+    let s = sample(&huge, &[[1e150, 0.0]], &opts).unwrap();
+    let summary = s.summary();
+    assert!(s.step_size.iter().all(|&h| h <= 1e6), "{summary}");
+    assert!(!summary.warnings().is_empty(), "{summary}");
+}
