@@ -35,7 +35,9 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 ///
 /// `q0` is one start (length d) for every chain, or one per chain (shape
 /// (chains, d)); each must lie on M. Each transition draws p ~ N(0, I) on
-/// the cotangent space, takes `steps` RATTLE steps of size `step_size`
+/// the cotangent space, takes `steps` RATTLE steps of size `step_size` (or,
+/// with `max_tree_depth=k`, a dynamic number: multinomial HMC with the
+/// no-U-turn criterion, its trajectory doubled at most k times)
 /// (adapted in warm-up towards `target_acceptance`, None keeps it, while
 /// holding proposals lost to failed solves to `target_failure_rate`), checks
 /// every step by stepping back (`reverse_tolerance`) and applies the
@@ -55,7 +57,7 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// No Gram-determinant correction is applied: to sample a density on R^d
 /// conditioned on g(q) = 0, add ½ log det(g_q g_qᵀ) to U.
 #[pyfunction]
-#[pyo3(signature = (system, q0, *, chains=4, draws=1000, warmup=1000, steps=10, step_size=0.1,
+#[pyo3(signature = (system, q0, *, chains=4, draws=1000, warmup=1000, steps=10, max_tree_depth=None, step_size=0.1,
     target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8, seed=0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample<'py>(
@@ -66,6 +68,7 @@ pub(crate) fn sample<'py>(
     draws: usize,
     warmup: usize,
     steps: usize,
+    max_tree_depth: Option<i64>,
     step_size: f64,
     target_acceptance: Option<f64>,
     target_failure_rate: f64,
@@ -82,11 +85,26 @@ pub(crate) fn sample<'py>(
         .unwrap_or(1);
     let (flat, _) = real_array(q0, "q0", if ndim == 2 { 2 } else { 1 }, d, "q, d")?;
     let starts: Vec<&[f64]> = flat.chunks(d.max(1)).collect();
+    // Range-checked here so that a negative depth is the package's error
+    // naming the value, not an OverflowError from the conversion.
+    let max_tree_depth = max_tree_depth
+        .map(|k| {
+            u32::try_from(k)
+                .ok()
+                .filter(|k| (1..=20).contains(k))
+                .ok_or_else(|| {
+                    InvalidInputError::new_err(format!(
+                        "invalid sampler option `max_tree_depth` = {k}: from 1 to 20"
+                    ))
+                })
+        })
+        .transpose()?;
     let options = SamplerOptions {
         chains,
         draws,
         warmup,
         steps,
+        max_tree_depth,
         step_size,
         step_size_jitter,
         target_acceptance,

@@ -138,6 +138,7 @@ def sample(
     draws: int = 1000,
     warmup: int = 1000,
     steps: int = 10,
+    max_tree_depth: Optional[int] = None,
     step_size: float = 0.1,
     target_acceptance: Optional[float] = 0.8,
     target_failure_rate: float = 0.01,

@@ -35,12 +35,28 @@ pub(crate) struct Transition {
     /// Forward steps taken.
     pub(crate) steps: usize,
     pub(crate) rejection: Option<Rejection>,
+    /// A failed solve or check ended the trajectory: the whole proposal
+    /// (static HMC) or the rest of the tree (dynamic).
+    pub(crate) failed: bool,
 }
 
 impl Transition {
-    /// Lost to a failed solve or check, not to the Metropolis test.
+    /// A proposal lost to a failed solve or check after `steps` steps;
+    /// `energy` is H at the start.
+    pub(super) fn rejected(kind: Rejection, energy: f64, steps: usize) -> Transition {
+        Transition {
+            accepted: false,
+            alpha: 0.0,
+            energy,
+            steps,
+            rejection: Some(kind),
+            failed: kind != Rejection::Metropolis,
+        }
+    }
+
+    /// Cut short by a failed solve or check.
     pub(crate) fn failed(&self) -> bool {
-        self.rejection.is_some_and(|r| r != Rejection::Metropolis)
+        self.failed
     }
 }
 
@@ -54,12 +70,14 @@ pub(crate) struct ChainOutput {
 pub(crate) struct Chain<S: ConstrainedSystem> {
     forward: Integrator<S, StormerVerlet>,
     backward: Integrator<S, StormerVerlet>,
-    rng: ChaCha8Rng,
+    pub(super) rng: ChaCha8Rng,
     steps: usize,
+    /// Dynamic integration time with trees of at most this depth.
+    max_tree_depth: Option<u32>,
     jitter: f64,
     reverse_tolerance: f64,
     /// The chain's position (on M) with the momentum of the transition.
-    current: State,
+    pub(super) current: State,
     /// The moving state of the trajectory.
     z: State,
     /// The state before the step being taken, for the reverse check.
@@ -99,6 +117,7 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             },
             rng,
             steps: opts.steps,
+            max_tree_depth: opts.max_tree_depth,
             jitter: opts.step_size_jitter,
             reverse_tolerance: opts.reverse_tolerance,
             current,
@@ -174,15 +193,16 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
     /// Algorithm 4): from h, double (or halve) it while one RATTLE step
     /// from the chain's position with a fresh momentum is accepted with
     /// probability above (or below) ½, a failed solve or check counting
-    /// as 0 (each trial is a transition of one step, which the chain keeps
-    /// as it keeps any warm-up transition). The adaptation's μ = log(10 h₀) then sits near the scale of
-    /// M and of U, whatever the units of q: dual averaging from a step
-    /// 10¹⁰ too small would need far more than a warm-up to get there.
-    /// Kept within [2⁻¹⁰⁷⁴·h, 10⁶] (the bound on any step size), so it ends.
+    /// as 0 (each trial is a static transition of one step, unjittered,
+    /// which the chain keeps as it keeps any warm-up transition). The
+    /// adaptation's μ = log(10 h₀) then sits near the scale of M and of U,
+    /// whatever the units of q: dual averaging from a step 10¹⁰ too small
+    /// would need far more than a warm-up to get there. Kept within
+    /// [2⁻¹⁰⁷⁴·h, 10⁶] (the bound on any step size), so it ends.
     fn initial_step_size(&mut self, h: f64) -> f64 {
         let steps = self.steps;
         self.steps = 1;
-        let up = self.transition(h).alpha > 0.5;
+        let up = self.transition_static(h).alpha > 0.5;
         let mut h = h;
         for _ in 0..2200 {
             let next = if up { 2.0 * h } else { 0.5 * h };
@@ -190,7 +210,7 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
                 break;
             }
             h = next;
-            let alpha = self.transition(h).alpha;
+            let alpha = self.transition_static(h).alpha;
             if (alpha > 0.5) != up {
                 break;
             }
@@ -199,10 +219,9 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         h
     }
 
-    /// One transition of constrained HMC with step size h (jittered when
-    /// asked): a fresh momentum
-    /// p ~ N(0, I) projected onto T*_q M, L RATTLE steps each checked by
-    /// its step back, the Metropolis test on ΔH.
+    /// One transition with step size h (jittered when asked): static
+    /// ([`Chain::transition_static`]) or dynamic
+    /// ([`Chain::transition_dynamic`]) as the options say.
     pub(crate) fn transition(&mut self, h: f64) -> Transition {
         let h = if self.jitter > 0.0 {
             let u: f64 = self.rng.random();
@@ -210,40 +229,57 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         } else {
             h
         };
+        match self.max_tree_depth {
+            None => self.transition_static(h),
+            Some(depth) => self.transition_dynamic(h, depth),
+        }
+    }
+
+    /// A fresh momentum p ~ N(0, I) projected onto T*_q M at the chain's
+    /// position, and H there; the rejection when that fails.
+    pub(super) fn refresh(&mut self, h: f64) -> Result<f64, Transition> {
         for p in self.current.p.iter_mut() {
             *p = self.rng.sample(StandardNormal);
         }
         // Π along the fibre p ↦ p − g_qᵀσ onto {g_q p = 0}: for
         // H = |p|²/2 + U the orthogonal projection onto the tangent space,
         // which turns N(0, I) into the standard normal on T*_q M.
-        let reject = |kind: Rejection, energy: f64, steps: usize| Transition {
-            accepted: false,
-            alpha: 0.0,
-            energy,
-            steps,
-            rejection: Some(kind),
-        };
         match self.forward.project(&self.current) {
             Ok(z) => self.current = z,
-            Err(e) => return reject(Rejection::of(&e), f64::NAN, 0),
+            Err(e) => return Err(Transition::rejected(Rejection::of(&e), f64::NAN, 0)),
         }
-        let sys = self.forward.system();
-        let h0 = sys.hamiltonian(self.current.q.as_slice(), self.current.p.as_slice());
+        let h0 = self.energy(&self.current);
         if !h0.is_finite() {
-            return reject(Rejection::NonFinite, h0, 0);
+            return Err(Transition::rejected(Rejection::NonFinite, h0, 0));
         }
-        self.z.clone_from(&self.current);
         self.forward.with_step_size(h);
         self.backward.with_step_size(-h);
+        Ok(h0)
+    }
+
+    /// H(z).
+    pub(super) fn energy(&self, z: &State) -> f64 {
+        self.forward
+            .system()
+            .hamiltonian(z.q.as_slice(), z.p.as_slice())
+    }
+
+    /// Static HMC: p ~ N(0, I) projected onto T*_q M, L RATTLE steps each
+    /// checked by its step back, the Metropolis test on ΔH.
+    fn transition_static(&mut self, h: f64) -> Transition {
+        let h0 = match self.refresh(h) {
+            Ok(h0) => h0,
+            Err(t) => return t,
+        };
+        self.z.clone_from(&self.current);
         for k in 0..self.steps {
             if let Err(kind) = self.checked_step() {
-                return reject(kind, h0, k);
+                return Transition::rejected(kind, h0, k);
             }
         }
-        let sys = self.forward.system();
-        let h1 = sys.hamiltonian(self.z.q.as_slice(), self.z.p.as_slice());
+        let h1 = self.energy(&self.z);
         if !h1.is_finite() {
-            return reject(Rejection::NonFinite, h0, self.steps);
+            return Transition::rejected(Rejection::NonFinite, h0, self.steps);
         }
         let alpha = (h0 - h1).exp().min(1.0);
         let u: f64 = self.rng.random();
@@ -255,6 +291,7 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
                 energy: h1,
                 steps: self.steps,
                 rejection: None,
+                failed: false,
             }
         } else {
             Transition {
@@ -263,6 +300,7 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
                 energy: h0,
                 steps: self.steps,
                 rejection: Some(Rejection::Metropolis),
+                failed: false,
             }
         }
     }
@@ -281,23 +319,38 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
     /// conditions (a miss at the tolerance, a solve at the edge of
     /// convergence), so rejecting is itself reversible to that precision.
     fn checked_step(&mut self) -> Result<(), Rejection> {
-        self.before.clone_from(&self.z);
-        self.forward
-            .step_in_place(&mut self.z)
-            .map_err(|e| Rejection::of(&e))?;
+        let mut z = std::mem::replace(&mut self.z, State::zeros(0));
+        let res = self.checked_step_from(&mut z, true);
+        self.z = z;
+        res
+    }
+
+    /// [`Chain::checked_step`] on z, forward in time (R_h, checked by
+    /// R_{−h}) or backward (R_{−h}, checked by R_h).
+    pub(super) fn checked_step_from(
+        &mut self,
+        z: &mut State,
+        forward: bool,
+    ) -> Result<(), Rejection> {
+        let (step, back) = if forward {
+            (&mut self.forward, &mut self.backward)
+        } else {
+            (&mut self.backward, &mut self.forward)
+        };
+        self.before.clone_from(z);
+        step.step_in_place(z).map_err(|e| Rejection::of(&e))?;
         if !self.reverse_tolerance.is_finite() {
             return Ok(());
         }
-        self.back.clone_from(&self.z);
+        self.back.clone_from(z);
         // Whatever stops the step back (its Newton, a degenerate N, a jump)
         // leaves the forward step not undone: a reversibility failure, not
         // a failure of the forward trajectory.
-        self.backward
-            .step_in_place(&mut self.back)
+        back.step_in_place(&mut self.back)
             .map_err(|_| Rejection::Reverse)?;
         if reverse_ok(
             self.before.q.as_slice(),
-            self.z.q.as_slice(),
+            z.q.as_slice(),
             self.back.q.as_slice(),
             self.reverse_tolerance,
         ) {

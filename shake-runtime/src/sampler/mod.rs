@@ -62,10 +62,28 @@
 //! need not be applied. A failed check or solve is a counted rejection
 //! ([`Rejection`]), never an error of the run.
 //!
+//! # Dynamic integration time
+//!
+//! With [`SamplerOptions::max_tree_depth`] the trajectory length is not
+//! fixed: multinomial HMC with the no-U-turn criterion (Hoffman and Gelman
+//! 2014; Betancourt 2017), mici's `DynamicMultinomialHMC`. The trajectory
+//! is doubled, forward or backward in time at random, by subtrees of the
+//! same checked RATTLE steps, until the momenta summed over it turn
+//! against its first or last momentum, and the chain moves to a state of
+//! the trajectory drawn with probability ∝ e^{−H}. A subtree that turns,
+//! diverges (H − H₀ > 1000) or meets a failed solve or check is dropped
+//! and the doubling stops: the trajectory is then one that building from
+//! any of its states would also stop at, so the scheme stays reversible.
+//! A draw that stayed at z₀ is counted as a `metropolis` rejection, or as
+//! the kind of failure that stopped the very first step.
+//!
 //! # Warm-up, chains, output
 //!
-//! Warm-up adapts h by dual averaging (Hoffman and Gelman 2014) towards
-//! [`SamplerOptions::target_acceptance`]; its draws are dropped. Chains
+//! Warm-up searches a step size near the scale of M, then adapts it by
+//! two dual averagings (Hoffman and Gelman 2014): towards
+//! [`SamplerOptions::target_acceptance`] and towards at most
+//! [`SamplerOptions::target_failure_rate`] of the trajectories cut short
+//! by a failed solve or check; its draws are dropped. Chains
 //! run in parallel on rayon's pool (install a pool to choose the number of
 //! threads, as for [`ensemble`](crate::ensemble())); each draws from its
 //! own stream (`chain`) of a ChaCha8 generator seeded with
@@ -96,6 +114,7 @@ mod chain;
 mod convergence;
 mod error;
 mod output;
+mod tree;
 
 pub use convergence::{ess_bulk, ess_mean, ess_tail, rhat};
 pub use error::SamplerError;
@@ -117,6 +136,11 @@ use chain::Chain;
 /// μ = log(10 h₀) and the engine's times stay finite.
 const MAX_STEP_SIZE: f64 = 1e6;
 
+/// The deepest tree of the dynamic integration time: 2²⁰ − 1 steps a
+/// transition, far past any useful trajectory, and a bound on the work a
+/// mistyped depth can ask for.
+const MAX_TREE_DEPTH: u32 = 20;
+
 /// The settings of a sampler run.
 ///
 /// ```
@@ -132,8 +156,29 @@ pub struct SamplerOptions {
     pub draws: usize,
     /// Warm-up transitions per chain, dropped (default 1000).
     pub warmup: usize,
-    /// L, the RATTLE steps of one transition (default 10).
+    /// L, the RATTLE steps of one transition (default 10); unused with
+    /// `max_tree_depth`.
     pub steps: usize,
+    /// `Some(k)`: a dynamic integration time instead of a fixed L:
+    /// multinomial HMC with the no-U-turn criterion (module docs),
+    /// its trajectory doubled until it turns back on itself, at most k
+    /// times (2^k − 1 steps; k in 1..=20). `None` (the default): static
+    /// HMC with `steps` steps.
+    ///
+    /// ```
+    /// use geoshake_runtime::examples::Pendulum;
+    /// use geoshake_runtime::sampler::{sample, Estimate, SamplerOptions};
+    /// // e^{2 cos θ} on the unit circle (gravity 2 along −y):
+    /// // E[−y] = I₁(2)/I₀(2) = 0.697775.
+    /// let circle = Pendulum { gravity: 2.0, length: 1.0 };
+    /// let opts = SamplerOptions { max_tree_depth: Some(8), draws: 2000, seed: 1, ..SamplerOptions::default() };
+    /// let s = sample(&circle, &[[0.0, -1.0]], &opts).unwrap();
+    /// let e = Estimate::of(&s.series(|q| -q[1]));
+    /// assert!((e.mean - 0.697775).abs() < 4.5 * e.mcse, "{e:?}");
+    /// // Trajectories of many lengths.
+    /// assert!(s.steps.iter().any(|&n| n > 3) && s.steps.iter().any(|&n| n <= 3));
+    /// ```
+    pub max_tree_depth: Option<u32>,
     /// h: the step size, the starting value of the adaptation when there
     /// is one (default 0.1); positive and at most 10⁶ (so that the
     /// adaptation's log(10 h) and every step's t + h stay finite).
@@ -182,6 +227,7 @@ impl Default for SamplerOptions {
             draws: 1000,
             warmup: 1000,
             steps: 10,
+            max_tree_depth: None,
             step_size: 0.1,
             step_size_jitter: 0.2,
             target_acceptance: Some(0.8),
@@ -211,6 +257,11 @@ impl SamplerOptions {
         }
         if self.steps == 0 {
             return invalid("steps", 0.0, "at least one RATTLE step per transition");
+        }
+        if let Some(k) = self.max_tree_depth
+            && !(1..=MAX_TREE_DEPTH).contains(&k)
+        {
+            return invalid("max_tree_depth", k as f64, "from 1 to 20");
         }
         if !(self.step_size > 0.0 && self.step_size <= MAX_STEP_SIZE) {
             return invalid("step_size", self.step_size, "positive and at most 1e6");

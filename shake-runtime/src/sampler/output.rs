@@ -197,10 +197,12 @@ pub struct Samples {
     pub dim: usize,
     /// The positions q, (chains, draws, dim) row-major.
     pub positions: Vec<f64>,
-    /// Whether the proposal of the transition was accepted.
+    /// Whether the proposal of the transition was accepted (dynamic
+    /// integration time: whether the draw left its start).
     pub accepted: Vec<bool>,
     /// The Metropolis acceptance probability min(1, e^{−ΔH}) of the
-    /// proposal (0 when a check rejected it).
+    /// proposal (0 when a check rejected it); with the dynamic integration
+    /// time, its mean over the trajectory's states (Stan's statistic).
     pub acceptance_probability: Vec<f64>,
     /// H(q, p) of the state the transition kept: the proposal if accepted,
     /// else the start with its fresh momentum. NaN when that momentum
@@ -208,7 +210,8 @@ pub struct Samples {
     /// `newton`, `degenerate` or `jump` rejection with 0 steps, and there is
     /// no momentum to give an energy); skip NaN entries when averaging.
     pub energy: Vec<f64>,
-    /// RATTLE steps taken forward (L, or fewer when a step failed).
+    /// RATTLE steps taken (L, or fewer when a step failed; with the
+    /// dynamic integration time, the trajectory's length).
     pub steps: Vec<usize>,
     /// Why the proposal was rejected (`None`: accepted).
     pub rejection: Vec<Option<Rejection>>,
