@@ -11,11 +11,17 @@ does, plus mici's effective samples per second and the ratio:
       rejected_reverse=… rejected_newton=… ess_per_s=… rhat=… check=pass|fail
       mici_ess_per_s=… speedup=…
 
-Both samplers run the same algorithm on the same target: static HMC with L
-RATTLE steps over Störmer–Verlet, a reversibility check, the Metropolis
-test, dual-averaging step-size adaptation towards acceptance 0.8 in
-warm-up, the same chains, warm-up and draws. mici (`StaticMetropolisHMC`,
-`ConstrainedLeapfrogIntegrator`, `dens_wrt_hausdorff=True`) gets
+Both samplers run the same algorithms on the same target, each with its
+defaults otherwise: static HMC with L RATTLE steps over Störmer–Verlet, a
+reversibility check and the Metropolis test (`integration=static`; mici's
+`StaticMetropolisHMC`), then multinomial HMC with the no-U-turn criterion,
+trees of depth ≤ 10 (`integration=dynamic`; mici's `DynamicMultinomialHMC`),
+with dual-averaging step-size adaptation towards acceptance 0.8 in
+warm-up, the same chains, warm-up and draws. Ours also jitters h by ±20 %
+and holds trajectories cut by failed solves to 1 % in warm-up (its
+defaults: without them a fixed L·h can bias the chain, docs/sampler.md);
+mici does neither. mici (`ConstrainedLeapfrogIntegrator`,
+`dens_wrt_hausdorff=True`) gets
 hand-written gradients and Jacobians; its projections stop at 1e-10,
 ours at round-off. Both run on one core (RAYON_NUM_THREADS=1, mici's
 n_process=1). ESS is the minimum over coordinates of the bulk ESS of both
@@ -43,6 +49,7 @@ except ImportError:  # pragma: no cover
 
 QUICK = "--quick" in sys.argv
 CHAINS, DRAWS, WARMUP, STEPS = (2, 200, 100, 10) if QUICK else (4, 1000, 500, 10)
+TREE_DEPTH = 10
 
 
 class Target:
@@ -127,23 +134,29 @@ def mcse(x):
     return x.std() / np.sqrt(geoshake.ess_bulk(x))
 
 
-def run_ours(t):
+def run_ours(t, dynamic):
     start = time.perf_counter()
     s = geoshake.sample(
-        t.system, t.q0, chains=CHAINS, draws=DRAWS, warmup=WARMUP, steps=STEPS, seed=1
+        t.system, t.q0, chains=CHAINS, draws=DRAWS, warmup=WARMUP, steps=STEPS, seed=1,
+        max_tree_depth=TREE_DEPTH if dynamic else None,
     )
     return s, time.perf_counter() - start
 
 
-def run_mici(t):
+def run_mici(t, dynamic):
     neg_log_dens, grad, constr, jacob = t.mici
     system = mici.systems.DenseConstrainedEuclideanMetricSystem(
         neg_log_dens, constr, grad_neg_log_dens=grad, jacob_constr=jacob, dens_wrt_hausdorff=True
     )
     integrator = mici.integrators.ConstrainedLeapfrogIntegrator(system, step_size=0.1)
-    sampler = mici.samplers.StaticMetropolisHMC(
-        system, integrator, np.random.default_rng(1), n_step=STEPS
-    )
+    if dynamic:
+        sampler = mici.samplers.DynamicMultinomialHMC(
+            system, integrator, np.random.default_rng(1), max_tree_depth=TREE_DEPTH
+        )
+    else:
+        sampler = mici.samplers.StaticMetropolisHMC(
+            system, integrator, np.random.default_rng(1), n_step=STEPS
+        )
     start = time.perf_counter()
     _, traces, _ = sampler.sample_chains(
         WARMUP,
@@ -158,8 +171,8 @@ def run_mici(t):
 
 def main():
     failed = False
-    for t in [sphere(0.0), sphere(2.0), torus(1.5)]:
-        s, ours_time = run_ours(t)
+    for t, dynamic in [(t, d) for d in (False, True) for t in [sphere(0.0), sphere(2.0), torus(1.5)]]:
+        s, ours_time = run_ours(t, dynamic)
         q = s["positions"]
         x = t.stat(q)
         # The gates of tests/suite/sampler.rs; R̂ and the ESS ask for more
@@ -168,11 +181,12 @@ def main():
         ok = abs(x.mean() - t.exact) <= 4.5 * mcse(x) and (QUICK or converged)
         failed |= not ok
         ess_per_s = min_ess(q) / ours_time
-        mq, mici_time = run_mici(t)
+        mq, mici_time = run_mici(t, dynamic)
         mici_ess_per_s = min_ess(mq) / mici_time
         rejected = s["rejection"]
         print(
-            f"sampler target={t.name} dim={q.shape[2]} constraints={t.system.constraint_count} "
+            f"sampler target={t.name} integration={'dynamic' if dynamic else 'static'} "
+            f"dim={q.shape[2]} constraints={t.system.constraint_count} "
             f"chains={CHAINS} draws={DRAWS} acceptance={s['accepted'].mean():.3f} "
             f"rejected_reverse={(rejected == 'reverse').sum()} "
             f"rejected_newton={(rejected == 'newton').sum()} "

@@ -141,7 +141,13 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
     /// those failures come where |p| is largest, at the crossings between
     /// modes, and a step size tuned on acceptance alone (which counts them
     /// only as rejections) keeps the chain on one side of M for thousands
-    /// of draws while every chain agrees, R̂ ≈ 1, on a wrong mean.
+    /// of draws while every chain agrees, R̂ ≈ 1, on a wrong mean. With the
+    /// dynamic integration time a failure only cuts the trajectory short,
+    /// the chain still moves, and the second averaging is not used: the
+    /// same von Mises density with a quarter of its trajectories cut came
+    /// out right from either end of the circle, and holding the cuts to
+    /// 1 % cost 1.6× in effective samples per second (von Mises–Fisher on
+    /// S², κ = 2).
     pub(crate) fn run(mut self, opts: &SamplerOptions, stop: &AtomicBool) -> Option<ChainOutput> {
         let stopped = || stop.load(Ordering::Relaxed);
         let mut h = opts.step_size;
@@ -150,19 +156,27 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
                 let h0 = self.initial_step_size(h);
                 let mut acceptance = DualAveraging::new(h0, target);
                 let mut solved = DualAveraging::new(h0, 1.0 - opts.target_failure_rate);
+                // A failure loses a static proposal whole, but only cuts a
+                // dynamic trajectory short: the chain still moves.
+                let static_hmc = self.max_tree_depth.is_none();
                 for _ in 0..opts.warmup {
                     if stopped() {
                         return None;
                     }
-                    let h = acceptance.step_size().min(solved.step_size());
+                    let h = if static_hmc {
+                        acceptance.step_size().min(solved.step_size())
+                    } else {
+                        acceptance.step_size()
+                    };
                     let t = self.transition(h.min(MAX_STEP_SIZE));
                     acceptance.update(t.alpha);
                     solved.update(if t.failed() { 0.0 } else { 1.0 });
                 }
-                h = acceptance
-                    .final_step_size()
-                    .min(solved.final_step_size())
-                    .min(MAX_STEP_SIZE);
+                h = acceptance.final_step_size();
+                if static_hmc {
+                    h = h.min(solved.final_step_size());
+                }
+                h = h.min(MAX_STEP_SIZE);
             }
         } else {
             for _ in 0..opts.warmup {

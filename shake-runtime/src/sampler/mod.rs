@@ -203,7 +203,9 @@ pub struct SamplerOptions {
     /// the momentum is largest, at the crossings between modes; a step
     /// tuned on acceptance alone can lose most crossings and leave every
     /// chain on one side, R̂ near 1 and the mean wrong. Used only when
-    /// `target_acceptance` is set.
+    /// `target_acceptance` is set, and only for static HMC (with
+    /// `max_tree_depth` a failure cuts the trajectory short but the chain
+    /// still moves).
     pub target_failure_rate: f64,
     /// A step q₀ → q₁ is rejected when its step back misses q₀ by more
     /// than this times ‖q₁ − q₀‖∞ + 10⁻⁴·max(‖q₀‖∞, ‖q₁‖∞) (default 1e-8):
