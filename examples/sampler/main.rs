@@ -1,8 +1,9 @@
 //! Constrained HMC (`geoshake::sampler`) on five targets with known answers,
-//! one line each:
+//! one line each for static HMC (L = 10) and for the dynamic integration
+//! time (multinomial HMC with the no-U-turn criterion, depth ≤ 10):
 //!
 //! ```text
-//! sampler target=… dim=… constraints=… chains=… draws=… acceptance=… rejected_reverse=…
+//! sampler target=… integration=static|dynamic dim=… constraints=… chains=… draws=… acceptance=… rejected_reverse=…
 //!   rejected_newton=… ess_per_s=… rhat=… check=pass|fail (then rejected_nonfinite=…
 //!   rejected_degenerate=… rejected_jump=… step_size=… seconds=…)
 //! ```
@@ -40,19 +41,43 @@ fn options() -> SamplerOptions {
     }
 }
 
-/// Samples `system` from `starts`, checks the expectations and prints the
-/// target's line.
+/// Samples `system` from `starts` with the static and the dynamic
+/// integration time, checks the expectations and prints one line for each.
 fn run<S, Q>(name: &str, system: &S, starts: &[Q], expectations: &[Expectation]) -> bool
 where
     S: ConstrainedSystem + Clone + Send + Sync,
     Q: AsRef<[f64]> + Sync,
 {
-    let opts = options();
+    let fixed = run_one(name, system, starts, expectations, None);
+    let dynamic = run_one(name, system, starts, expectations, Some(10));
+    fixed && dynamic
+}
+
+fn run_one<S, Q>(
+    name: &str,
+    system: &S,
+    starts: &[Q],
+    expectations: &[Expectation],
+    max_tree_depth: Option<u32>,
+) -> bool
+where
+    S: ConstrainedSystem + Clone + Send + Sync,
+    Q: AsRef<[f64]> + Sync,
+{
+    let opts = SamplerOptions {
+        max_tree_depth,
+        ..options()
+    };
+    let integration = if max_tree_depth.is_some() {
+        "dynamic"
+    } else {
+        "static"
+    };
     let clock = Instant::now();
     let samples: Samples = match sample(system, starts, &opts) {
         Ok(s) => s,
         Err(e) => {
-            println!("sampler target={name} error=\"{e}\" check=fail");
+            println!("sampler target={name} integration={integration} error=\"{e}\" check=fail");
             return false;
         }
     };
@@ -69,7 +94,7 @@ where
     let r = summary.rejected();
     let mean_h = samples.step_size.iter().sum::<f64>() / samples.step_size.len() as f64;
     println!(
-        "sampler target={name} dim={} constraints={} chains={} draws={} acceptance={:.3} \
+        "sampler target={name} integration={integration} dim={} constraints={} chains={} draws={} acceptance={:.3} \
          rejected_reverse={} rejected_newton={} ess_per_s={:.0} rhat={:.4} check={} \
          rejected_nonfinite={} rejected_degenerate={} rejected_jump={} step_size={:.3} seconds={:.3}",
         system.dof(),
