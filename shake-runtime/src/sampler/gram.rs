@@ -5,7 +5,7 @@
 //! # The correction
 //!
 //! By the co-area formula (Federer 1969, §3.2; Diaconis, Holmes and
-//! Shahshahani 2013, Section 3), for q with density π on R^d,
+//! Shahshahani 2013), for q with density π on R^d,
 //!
 //!   ∫ f(q) π(q) J(q) dq = ∫_{R^m} ∫_{g = c} f π dσ dc,  J = √det G,
 //!   G(q) = g_q g_qᵀ (m × m, g_q = ∂g/∂q of size m × d),
