@@ -6,7 +6,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use geoshake::runtime::sampler::{self, SamplerError, SamplerOptions, Samples};
+use geoshake::runtime::sampler::{self, Density, SamplerError, SamplerOptions, Samples};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
@@ -54,11 +54,16 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// `ess_bulk`, `ess_tail` (d,). For ArviZ: `arviz.from_dict(posterior={"q":
 /// s["positions"]}, sample_stats={"energy": s["energy"]})`.
 ///
-/// No Gram-determinant correction is applied: to sample a density on R^d
-/// conditioned on g(q) = 0, add ½ log det(g_q g_qᵀ) to U.
+/// `density` says what e^{−U} is a density of: "hausdorff" (the default)
+/// with respect to the surface measure of M; "ambient" a density on R^d
+/// conditioned on g(q) = 0, which by the co-area formula is
+/// e^{−U}/√det(g_q g_qᵀ) on M: the sampler adds ½ log det(g_q g_qᵀ) to U
+/// (and to `energy`), as mici's `dens_wrt_hausdorff=False`. Any other value
+/// raises `InvalidInputError`.
 #[pyfunction]
 #[pyo3(signature = (system, q0, *, chains=4, draws=1000, warmup=1000, steps=10, max_tree_depth=None, step_size=0.1,
-    target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8, seed=0))]
+    target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8, seed=0,
+    density="hausdorff"))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample<'py>(
     py: Python<'py>,
@@ -75,7 +80,17 @@ pub(crate) fn sample<'py>(
     step_size_jitter: f64,
     reverse_tolerance: f64,
     seed: u64,
+    density: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let density = match density {
+        "hausdorff" => Density::Hausdorff,
+        "ambient" => Density::Ambient,
+        other => {
+            return Err(InvalidInputError::new_err(format!(
+                "density must be \"hausdorff\" or \"ambient\", not {other:?}"
+            )))
+        }
+    };
     let d = system.dof();
     let ndim: usize = q0
         .py()
@@ -111,6 +126,7 @@ pub(crate) fn sample<'py>(
         target_failure_rate,
         reverse_tolerance,
         seed,
+        density,
     };
     let stop = AtomicBool::new(false);
     let (samples, interrupt) = std::thread::scope(|scope| {

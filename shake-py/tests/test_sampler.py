@@ -76,6 +76,47 @@ def test_dynamic_integration_time_has_the_von_mises_fisher_moments():
     assert len(np.unique(s["steps"])) > 3
 
 
+ELLIPSE = """
+struct Ellipse {
+    parameters { a, b }
+    dof q[2], p[2];
+    hamiltonian = (p[0]^2 + p[1]^2) / 2;
+    constraints { ellipse: q[0]^2 / a^2 + q[1]^2 / b^2 - 1 }
+}"""
+
+
+def ellipse_x2(a, b, density):
+    """E[x²] for U = 0 on the ellipse, by the trapezoidal rule in θ
+    (x = a cos θ, y = b sin θ; exact to round-off for a smooth periodic
+    integrand). "hausdorff": uniform in arc length, weight ds/dθ.
+    "ambient": density 1/|∇g| w.r.t. arc length (co-area), weight
+    (ds/dθ)/|∇g|, a constant: uniform in θ."""
+    t = np.linspace(0.0, 2 * np.pi, 4096, endpoint=False)
+    arc = np.sqrt(a**2 * np.sin(t) ** 2 + b**2 * np.cos(t) ** 2)
+    grad = 2 * np.sqrt(np.cos(t) ** 2 / a**2 + np.sin(t) ** 2 / b**2)
+    w = arc if density == "hausdorff" else arc / grad
+    return (w * a**2 * np.cos(t) ** 2).sum() / w.sum()
+
+
+@pytest.mark.parametrize("density, other", [("hausdorff", "ambient"), ("ambient", "hausdorff")])
+def test_the_ellipse_under_each_density(density, other):
+    # E[x²] = 1.680 (arc length) and a²/2 = 2 (conditioned from R²), 0.32
+    # apart: each run passes its own answer within 4.5 MCSE and is at least
+    # 10 MCSE from the other's, so the test fails if `density` does nothing.
+    a, b = 2.0, 1.0
+    assert abs(ellipse_x2(a, b, "ambient") - a**2 / 2) < 1e-12
+    ellipse = geoshake.declare(ELLIPSE, a=a, b=b)
+    starts = [[2.0, 0.0], [0.0, 1.0], [-2.0, 0.0], [0.0, -1.0]]
+    s = geoshake.sample(
+        ellipse, starts, chains=4, draws=2000, warmup=500, seed=21, density=density
+    )
+    x2 = s["positions"][:, :, 0] ** 2
+    err = mcse(x2)
+    assert abs(x2.mean() - ellipse_x2(a, b, density)) <= GATE * err, (x2.mean(), err)
+    assert abs(x2.mean() - ellipse_x2(a, b, other)) >= 10 * err, (x2.mean(), err)
+    assert s["rhat"].max() < 1.05
+
+
 def test_the_output_is_what_arviz_reads():
     s = geoshake.sample(
         geoshake.declare(SPHERE, kappa=1.0), [0.0, 0.0, 1.0], chains=2, draws=50, warmup=20
@@ -131,6 +172,7 @@ def test_one_start_per_chain():
         ([0.0, 0.0, 1.0], {"max_tree_depth": -1}, geoshake.InvalidInputError, "max_tree_depth"),
         ([0.0, 0.0, 1.0], {"max_tree_depth": 21}, geoshake.InvalidInputError, "max_tree_depth"),
         ([0.0, 0.0, 1.0], {"draws": 2**62}, geoshake.InvalidInputError, "do not fit in memory"),
+        ([0.0, 0.0, 1.0], {"density": "uniform"}, geoshake.InvalidInputError, "density"),
     ],
 )
 def test_bad_input_is_refused_with_the_package_errors(q0, kw, error, says):

@@ -4,7 +4,9 @@
 //! the matrix Fisher density on SO(3) ⊂ R⁹ (six constraints), and a
 //! Gaussian along a wavy curve in R², whose folds make the reversibility
 //! check matter and whose arc length tells the Hausdorff target from the
-//! co-area one.
+//! co-area one, and U = 0 on an ellipse; the last two under both
+//! `Density::Hausdorff` and `Density::Ambient` (the Gram-determinant
+//! correction).
 //!
 //! Each expectation E[f] passes two gates. The statistical one: its
 //! z-score, the estimate's distance from the exact value in Monte Carlo
@@ -18,8 +20,8 @@
 //! False failures of a correct sampler, all gates together:
 //! - z: the estimate is asymptotically normal around the exact value,
 //!   P(|Z| > 4.5) = 6.8e-6, and the ±10 % uncertainty of an ESS near 1000
-//!   moves the threshold to about 4.3σ (1.7e-5); over the 21 expectations
-//!   below, 3.6e-4 per run.
+//!   moves the threshold to about 4.3σ (1.7e-5); over the 25 expectations
+//!   below, 4.3e-4 per run.
 //! - R̂ < 1.05: over 8 split chains of n draws with integrated
 //!   autocorrelation τ, R̂² − 1 ≈ (τ·χ²₇/7 − 1)/n, so R̂ ≥ 1.05 needs
 //!   χ²₇/7 ≳ 0.1 n/τ. With τ from the ESS of the mean, n/τ is at least
@@ -32,13 +34,17 @@
 //!   have to be under a third of its value, far beyond the estimator's own
 //!   spread (about 10 % there).
 //!
-//! So about 4e-4 per run, one seed in 2 500, set by the z gate. The seeds
+//! So about 4e-4 per run, one seed in 2 300, set by the z gate. The seeds
 //! are fixed, so the tests are deterministic.
 //!
-//! The checks can fail, and three tests show it: the von Mises–Fisher
+//! The checks can fail, and these show it: the von Mises–Fisher
 //! estimate against the answer for a 10 % larger concentration, the wavy
-//! curve against the co-area target, and the wavy curve sampled without
-//! the reversibility check, are all refused, and by the z gate with both
+//! curve against the co-area target and (under `Density::Ambient`)
+//! against the Hausdorff one, the ellipse under each density against the
+//! other's answer, and the wavy curve sampled without the reversibility
+//! check, are all refused (by 13 to 29 standard errors: a correct
+//! sampler's estimate lands within 4.5 of them with probability below
+//! 1e-15), and by the z gate with both
 //! diagnostics met: far off while well mixed, not unmixed. (Without the
 //! Metropolis test the von Mises–Fisher, torus and SO(3) checks fail by 5
 //! to 14 standard errors; without the projection of p every proposal fails
@@ -47,7 +53,7 @@
 use std::sync::OnceLock;
 
 use geoshake::constrained_system;
-use geoshake::sampler::{sample, Estimate, SamplerOptions, Samples};
+use geoshake::sampler::{sample, Density, Estimate, SamplerOptions, Samples};
 
 /// The largest |z-score| accepted (see the file's docs for its false
 /// failure rate).
@@ -357,7 +363,7 @@ fn wavy_moment(a: f64, w: f64, hausdorff: bool, f: impl Fn(f64) -> f64) -> f64 {
 const WAVY: Wavy = Wavy { a: 0.5, w: 3.0 };
 
 /// The draws have density e^{−U} with respect to arc length (the
-/// Hausdorff measure), with no Gram-determinant correction: E[y²] is
+/// Hausdorff measure) under the default `Density::Hausdorff`: E[y²] is
 /// 0.1076 there, and 0.125 for the conditional of a Gaussian in x given
 /// the curve (density e^{−U}/√det(g_q g_qᵀ) with respect to arc length,
 /// mici's `dens_wrt_hausdorff = False`), which the check refuses.
@@ -523,5 +529,113 @@ mod dynamic {
         };
         let s = sample(&VonMisesFisher { kappa: 3.0 }, &SPHERE_STARTS, &opts).unwrap();
         von_mises_fisher_checks(&s);
+    }
+}
+
+/// The same curve with `Density::Ambient`: e^{−x²/2} on R² conditioned on
+/// y = a sin ωx. Its density with respect to arc length is
+/// e^{−x²/2}/√det(g_q g_qᵀ) = e^{−x²/2}/√(1 + (aω cos ωx)²), and
+/// ds = √(1 + (aω cos ωx)²) dx, so x ~ N(0, 1) exactly: E[x²] = 1 and
+/// E[y²] = a²(1 − e^{−2ω²})/2 = 0.125 (the quadrature of `wavy_moment`
+/// agrees). The Hausdorff answer E[y²] = 0.1076 is refused, so the test
+/// fails if the option changes nothing.
+#[test]
+fn wavy_curve_conditioned_from_the_plane() {
+    let (a, w) = (WAVY.a, WAVY.w);
+    let y2 = |x: f64| (a * (w * x).sin()).powi(2);
+    let exact_y2 = a * a * (1.0 - (-2.0 * w * w).exp()) / 2.0;
+    assert!((wavy_moment(a, w, false, y2) - exact_y2).abs() < 1e-12);
+    assert!((wavy_moment(a, w, false, |x| x * x) - 1.0).abs() < 1e-12);
+    let opts = SamplerOptions {
+        density: Density::Ambient,
+        ..options(18)
+    };
+    let s = sample(&WAVY, &[[0.0, 0.0]], &opts).unwrap();
+    let checks = [
+        Check::new("E[x^2] = 1", &s, |q| q[0] * q[0], 1.0),
+        Check::new("E[y^2]", &s, |q| q[1] * q[1], exact_y2),
+    ];
+    assert_checks("wavy curve, ambient", &s, &checks);
+    let hausdorff = Check::new(
+        "E[y^2], Hausdorff",
+        &s,
+        |q| q[1] * q[1],
+        wavy_moment(a, w, true, y2),
+    );
+    println!("{}", hausdorff.line());
+    assert!(hausdorff.refused_by_z(), "{}", hausdorff.line());
+}
+
+constrained_system! {
+    /// The ellipse x²/a² + y²/b² = 1 in R² with U = 0.
+    pub struct Ellipse {
+        parameters { a, b }
+        dof q[2], p[2];
+        hamiltonian = (p[0]^2 + p[1]^2) / 2;
+        constraints { ellipse: q[0]^2 / a^2 + q[1]^2 / b^2 - 1 }
+    }
+}
+
+/// E[x²] on the ellipse (a, b) with U = 0, by the trapezoidal rule in θ
+/// (x = a cos θ, y = b sin θ) on 4 096 nodes, exact to round-off for
+/// these smooth periodic integrands. Hausdorff: uniform in arc length,
+/// weight ds/dθ = √(a² sin²θ + b² cos²θ). Ambient: density 1/|∇g| with
+/// respect to arc length (the co-area formula, det(g_q g_qᵀ) = |∇g|²),
+/// weight (ds/dθ)/|∇g| with |∇g| = 2√(cos²θ/a² + sin²θ/b²), which is the
+/// constant ab/2: uniform in θ, E[x²] = a²/2 (asserted below as a check
+/// of this derivation).
+fn ellipse_x2(a: f64, b: f64, density: Density) -> f64 {
+    let n = 4096;
+    let (mut num, mut den) = (0.0, 0.0);
+    for i in 0..n {
+        let t = 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+        let (c, s) = (t.cos(), t.sin());
+        let arc = (a * a * s * s + b * b * c * c).sqrt();
+        let grad = 2.0 * (c * c / (a * a) + s * s / (b * b)).sqrt();
+        let weight = match density {
+            Density::Hausdorff => arc,
+            Density::Ambient => arc / grad,
+        };
+        num += weight * a * a * c * c;
+        den += weight;
+    }
+    num / den
+}
+
+/// U = 0 on the ellipse a = 2, b = 1, sampled under each density: E[x²]
+/// is 1.6803 for the uniform distribution in arc length (Hausdorff) and
+/// a²/2 = 2 for the uniform one in θ (Ambient). Each run passes its own
+/// answer and refuses the other's, so the test fails if the option does
+/// nothing (or does something else).
+#[test]
+fn the_ellipse_under_both_densities() {
+    let (a, b) = (2.0, 1.0);
+    let ellipse = Ellipse { a, b };
+    assert!((ellipse_x2(a, b, Density::Ambient) - a * a / 2.0).abs() < 1e-12);
+    let starts = [[2.0, 0.0], [0.0, 1.0], [-2.0, 0.0], [0.0, -1.0]];
+    for (density, other, seed) in [
+        (Density::Hausdorff, Density::Ambient, 19),
+        (Density::Ambient, Density::Hausdorff, 20),
+    ] {
+        let opts = SamplerOptions {
+            density,
+            ..options(seed)
+        };
+        let s = sample(&ellipse, &starts, &opts).unwrap();
+        let x2 = |q: &[f64]| q[0] * q[0];
+        let target = format!("ellipse, {density:?}");
+        assert_checks(
+            &target,
+            &s,
+            &[Check::new("E[x^2]", &s, x2, ellipse_x2(a, b, density))],
+        );
+        let wrong = Check::new(
+            format!("E[x^2], {other:?}"),
+            &s,
+            x2,
+            ellipse_x2(a, b, other),
+        );
+        println!("{}", wrong.line());
+        assert!(wrong.refused_by_z(), "{target}: {}", wrong.line());
     }
 }

@@ -21,15 +21,15 @@
 //! factor e^{−|p|²/2} integrates over every fibre to the same
 //! (2π)^{(d−m)/2}, so the q-marginal of e^{−H} is e^{−U} σ_M = π σ_M.
 //!
-//! **No Gram-determinant correction is applied.** It is needed for another
-//! target: when π is a density on R^d and the intended distribution is
-//! that of q given g(q) = 0 (the co-area formula), its density with
-//! respect to σ_M is π(q)/√det(g_q g_qᵀ). That is mici's
-//! `dens_wrt_hausdorff = False`, which adds ½ log det(g_q g_qᵀ) to U; this
-//! sampler is mici's `dens_wrt_hausdorff = True`. To sample the
-//! conditional, declare U + ½ log det(g_q g_qᵀ) as the potential (for a
-//! sphere |q|² − r², a product of circles, or SO(3) as RᵀR − I, the Gram
-//! matrix is constant on M and the two targets coincide).
+//! **The Gram-determinant correction is an option.** It is needed for
+//! another target: when π is a density on R^d and the intended
+//! distribution is that of q given g(q) = 0 (the co-area formula), its
+//! density with respect to σ_M is π(q)/√det(g_q g_qᵀ).
+//! [`Density::Ambient`] samples that one, with the potential
+//! U + ½ log det(g_q g_qᵀ) (mici's `dens_wrt_hausdorff = False`); the
+//! default [`Density::Hausdorff`] is mici's `dens_wrt_hausdorff = True`.
+//! For a sphere |q|² − r², a product of circles, or SO(3) as RᵀR − I, the
+//! Gram matrix is constant on M and the two targets coincide.
 //!
 //! # One transition
 //!
@@ -113,6 +113,7 @@ mod adapt;
 mod chain;
 mod convergence;
 mod error;
+mod gram;
 mod output;
 mod tree;
 
@@ -130,6 +131,7 @@ use crate::state::State;
 use crate::system::ConstrainedSystem;
 
 use chain::Chain;
+use gram::Gram;
 
 /// The largest step size accepted: far beyond any usable step on a
 /// manifold of any sensible scale, and small enough that the adaptation's
@@ -140,6 +142,54 @@ const MAX_STEP_SIZE: f64 = 1e6;
 /// transition, far past any useful trajectory, and a bound on the work a
 /// mistyped depth can ask for.
 const MAX_TREE_DEPTH: u32 = 20;
+
+/// Which measure the density e^{−U} of the system is taken with respect
+/// to, and so which distribution on M is sampled.
+///
+/// - [`Density::Hausdorff`] (the default): π = e^{−U} is a density on M
+///   with respect to its surface (Hausdorff) measure σ_M, the measure
+///   RATTLE preserves ([module](self) docs). Use it when U was written for
+///   M itself: a von Mises–Fisher density on a sphere, a Boltzmann density
+///   of a molecule with rigid bonds whose reference measure is σ_M, a
+///   uniform distribution on M.
+/// - [`Density::Ambient`]: π = e^{−U} is a density on R^d, and the target
+///   is the law of q given g(q) = 0. By the co-area formula (Federer 1969,
+///   §3.2; Diaconis, Holmes and Shahshahani 2013) its density with respect
+///   to σ_M is π/√det G, G = g_q g_qᵀ: the sampler runs on the potential
+///   U + ½ log det G, whose gradient Σ_i ∇²g_i w_i (w_i the column i of
+///   g_qᵀ G⁻¹) it computes from the constraints' second derivatives. Use
+///   it to condition a model on R^d on an observation g(q) = 0 (mici's
+///   `dens_wrt_hausdorff = False`). The target then depends on g, not
+///   only on M: g and c(q)·g give other conditionals (Borel's paradox).
+///
+/// The two agree where det G is constant on M (a sphere |q|² − r², a
+/// product of circles, SO(3) as RᵀR − I). On the ellipse
+/// x²/a² + y²/b² = 1 with U = 0, Hausdorff is uniform in arc length and
+/// Ambient uniform in the angle θ of x = a cos θ, y = b sin θ: with
+/// g = x²/a² + y²/b² − 1, |∇g| = (2/(ab))·√(a² sin²θ + b² cos²θ) and
+/// ds = √(a² sin²θ + b² cos²θ) dθ, so ds/|∇g| = (ab/2) dθ.
+///
+/// An enum rather than a flag: the call site names the measure
+/// (`density: Density::Ambient`), as Python's `density="ambient"` does.
+/// Ambient costs per gradient one LU of the m × m matrix G and m
+/// evaluations of a constraint's Hessian; the draws' `energy` is then that
+/// of the corrected potential.
+///
+/// ```
+/// use geoshake_runtime::sampler::{Density, SamplerOptions};
+/// let opts = SamplerOptions { density: Density::Ambient, ..SamplerOptions::default() };
+/// assert_eq!(SamplerOptions::default().density, Density::Hausdorff);
+/// # let _ = opts;
+/// ```
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Density {
+    /// e^{−U} with respect to the surface measure of M.
+    #[default]
+    Hausdorff,
+    /// e^{−U} a density on R^d, conditioned on g(q) = 0: e^{−U}/√det(g_q g_qᵀ)
+    /// with respect to the surface measure of M.
+    Ambient,
+}
 
 /// The settings of a sampler run.
 ///
@@ -220,6 +270,9 @@ pub struct SamplerOptions {
     pub reverse_tolerance: f64,
     /// The seed of every chain's generator (default 0).
     pub seed: u64,
+    /// The measure e^{−U} is a density with respect to (default
+    /// [`Density::Hausdorff`]; see [`Density`]).
+    pub density: Density,
 }
 
 impl Default for SamplerOptions {
@@ -236,6 +289,7 @@ impl Default for SamplerOptions {
             target_failure_rate: 0.01,
             reverse_tolerance: 1e-8,
             seed: 0,
+            density: Density::Hausdorff,
         }
     }
 }
@@ -294,8 +348,8 @@ impl SamplerOptions {
     }
 }
 
-/// Samples the density e^{−U} (with respect to the Hausdorff measure on M)
-/// of `system`, H = ½|p|² + U(q) with holonomic constraints g(q), by
+/// Samples the density e^{−U} (with respect to the Hausdorff measure on M,
+/// or conditioned from R^d: [`SamplerOptions::density`]) of `system`, H = ½|p|² + U(q) with holonomic constraints g(q), by
 /// constrained HMC (see the [module](self) docs). `starts` holds one point
 /// of M for every chain, or one for all.
 ///
@@ -370,18 +424,10 @@ where
         }
     }
     check_structure(system)?;
-    let mut probe = Integrator::new(system.clone(), StormerVerlet, options.step_size);
-    for c in 0..starts.len() {
-        check_start(&mut probe, start(c), c)?;
-    }
-    check_identity_mass(system, start(0))?;
-    check_storage(options.chains, options.draws, d)?;
-
-    let outputs: Option<Vec<chain::ChainOutput>> = (0..options.chains)
-        .into_par_iter()
-        .map(|c| Chain::new(system, start(c), options.seed, c, options).run(options, stop))
-        .collect();
-    let outputs = outputs.ok_or(SamplerError::Interrupted)?;
+    let outputs = match options.density {
+        Density::Hausdorff => run_chains(system, starts, options, stop)?,
+        Density::Ambient => run_chains(&Gram::new(system.clone()), starts, options, stop)?,
+    };
 
     let (chains, draws) = (options.chains, options.draws);
     let mut samples = Samples {
@@ -408,6 +454,33 @@ where
         samples.step_size.push(out.step_size);
     }
     Ok(samples)
+}
+
+/// The checks of the starts against `system` (the potential the chains
+/// run on, corrected or not), then the chains; the starts' count and
+/// lengths are checked by the caller.
+fn run_chains<S, Q>(
+    system: &S,
+    starts: &[Q],
+    options: &SamplerOptions,
+    stop: &AtomicBool,
+) -> Result<Vec<chain::ChainOutput>, SamplerError>
+where
+    S: ConstrainedSystem + Clone + Send + Sync,
+    Q: AsRef<[f64]> + Sync,
+{
+    let start = |c: usize| starts[if starts.len() == 1 { 0 } else { c }].as_ref();
+    let mut probe = Integrator::new(system.clone(), StormerVerlet, options.step_size);
+    for c in 0..starts.len() {
+        check_start(&mut probe, start(c), c)?;
+    }
+    check_identity_mass(system, start(0))?;
+    check_storage(options.chains, options.draws, system.dof())?;
+    let outputs: Option<Vec<chain::ChainOutput>> = (0..options.chains)
+        .into_par_iter()
+        .map(|c| Chain::new(system, start(c), options.seed, c, options).run(options, stop))
+        .collect();
+    outputs.ok_or(SamplerError::Interrupted)
 }
 
 /// The bytes of one draw besides its d positions: acceptance
