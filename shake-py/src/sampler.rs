@@ -9,8 +9,9 @@ use std::time::Duration;
 use geoshake::runtime::sampler::{self, Density, SamplerError, SamplerOptions, Samples};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::IntoPyArray;
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBool, PyDict, PyInt};
 
 use crate::{real_array, typed_error, with_model, InvalidInputError, System};
 
@@ -44,7 +45,8 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// Metropolis test. A failed solve or check rejects the proposal (counted
 /// by kind in `rejection`), never raises. Chains run in parallel with the
 /// GIL released; each chain's draws depend on `seed` and its index only.
-/// Ctrl-C stops every chain within a transition and raises
+/// Ctrl-C stops every chain at the end of its current transition (a tree
+/// of depth 20 at a tiny step is 10⁶ steps: seconds) and raises
 /// KeyboardInterrupt.
 ///
 /// Returns a dict of NumPy arrays: `positions` (chains, draws, d),
@@ -61,27 +63,36 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// (and to `energy`), as mici's `dens_wrt_hausdorff=False`. Any other value
 /// raises `InvalidInputError`.
 #[pyfunction]
-#[pyo3(signature = (system, q0, *, chains=4, draws=1000, warmup=1000, steps=10, max_tree_depth=None, step_size=0.1,
-    target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8, seed=0,
-    density="hausdorff"))]
+#[pyo3(signature = (system, q0, *, chains=Whole::Fits(4), draws=Whole::Fits(1000),
+    warmup=Whole::Fits(1000), steps=Whole::Fits(10), max_tree_depth=None, step_size=0.1,
+    target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8,
+    seed=Whole::Fits(0), density="hausdorff"))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample<'py>(
     py: Python<'py>,
     system: &System,
     q0: &Bound<'py, PyAny>,
-    chains: usize,
-    draws: usize,
-    warmup: usize,
-    steps: usize,
-    max_tree_depth: Option<i64>,
+    chains: Whole,
+    draws: Whole,
+    warmup: Whole,
+    steps: Whole,
+    max_tree_depth: Option<Whole>,
     step_size: f64,
     target_acceptance: Option<f64>,
     target_failure_rate: f64,
     step_size_jitter: f64,
     reverse_tolerance: f64,
-    seed: u64,
+    seed: Whole,
     density: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let chains = chains.within("chains", 0, usize::MAX as u64)? as usize;
+    let draws = draws.within("draws", 0, usize::MAX as u64)? as usize;
+    let warmup = warmup.within("warmup", 0, usize::MAX as u64)? as usize;
+    let steps = steps.within("steps", 0, usize::MAX as u64)? as usize;
+    let seed = seed.within("seed", 0, u64::MAX)?;
+    let max_tree_depth = max_tree_depth
+        .map(|k| k.within("max_tree_depth", 1, 20).map(|k| k as u32))
+        .transpose()?;
     let density = match density {
         "hausdorff" => Density::Hausdorff,
         "ambient" => Density::Ambient,
@@ -100,20 +111,6 @@ pub(crate) fn sample<'py>(
         .unwrap_or(1);
     let (flat, _) = real_array(q0, "q0", if ndim == 2 { 2 } else { 1 }, d, "q, d")?;
     let starts: Vec<&[f64]> = flat.chunks(d.max(1)).collect();
-    // Range-checked here so that a negative depth is the package's error
-    // naming the value, not an OverflowError from the conversion.
-    let max_tree_depth = max_tree_depth
-        .map(|k| {
-            u32::try_from(k)
-                .ok()
-                .filter(|k| (1..=20).contains(k))
-                .ok_or_else(|| {
-                    InvalidInputError::new_err(format!(
-                        "invalid sampler option `max_tree_depth` = {k}: from 1 to 20"
-                    ))
-                })
-        })
-        .transpose()?;
     let options = SamplerOptions {
         chains,
         draws,
@@ -154,6 +151,47 @@ pub(crate) fn sample<'py>(
         .map_err(|_| InvalidInputError::new_err("the sampler's thread panicked"))?
         .map_err(|e| error(py, &e))?;
     arrays(py, &samples)
+}
+
+/// A Python int option as it came: one that fits in a u64, or the text of
+/// one that does not. Converting straight to an unsigned Rust integer
+/// would raise OverflowError for −1 or 2**70, not the package's error
+/// naming the option; a float or a bool is refused as a TypeError.
+pub(crate) enum Whole {
+    Fits(u64),
+    Outside(String),
+}
+
+impl<'py> FromPyObject<'_, 'py> for Whole {
+    type Error = PyErr;
+
+    fn extract(obj: Borrowed<'_, 'py, PyAny>) -> PyResult<Self> {
+        if obj.is_instance_of::<PyBool>() || !obj.is_instance_of::<PyInt>() {
+            return Err(PyTypeError::new_err(format!(
+                "an integer is required, not {}",
+                obj.get_type().name()?
+            )));
+        }
+        Ok(match obj.extract::<u64>() {
+            Ok(v) => Whole::Fits(v),
+            Err(_) => Whole::Outside(obj.str()?.to_string()),
+        })
+    }
+}
+
+impl Whole {
+    /// The value, or the package's error naming `what` when it is
+    /// outside [lo, hi].
+    fn within(self, what: &str, lo: u64, hi: u64) -> PyResult<u64> {
+        let text = match self {
+            Whole::Fits(v) if (lo..=hi).contains(&v) => return Ok(v),
+            Whole::Fits(v) => v.to_string(),
+            Whole::Outside(text) => text,
+        };
+        Err(InvalidInputError::new_err(format!(
+            "invalid sampler option `{what}` = {text}: an integer from {lo} to {hi}"
+        )))
+    }
 }
 
 /// The draws and their summary as a dict of NumPy arrays.

@@ -171,6 +171,13 @@ def test_one_start_per_chain():
         ([0.0, 0.0, 1.0], {"target_failure_rate": 0.0}, geoshake.InvalidInputError, "failure"),
         ([0.0, 0.0, 1.0], {"max_tree_depth": -1}, geoshake.InvalidInputError, "max_tree_depth"),
         ([0.0, 0.0, 1.0], {"max_tree_depth": 21}, geoshake.InvalidInputError, "max_tree_depth"),
+        # Integers past a u64 or negative: the package's error naming the
+        # option, not Python's OverflowError.
+        ([0.0, 0.0, 1.0], {"max_tree_depth": 2**70}, geoshake.InvalidInputError, "max_tree_depth"),
+        ([0.0, 0.0, 1.0], {"chains": -1}, geoshake.InvalidInputError, "`chains` = -1"),
+        ([0.0, 0.0, 1.0], {"warmup": -1}, geoshake.InvalidInputError, "`warmup` = -1"),
+        ([0.0, 0.0, 1.0], {"seed": 2**64}, geoshake.InvalidInputError, "`seed` = 18446744073709551616"),
+        ([0.0, 0.0, 1.0], {"steps": -2**70}, geoshake.InvalidInputError, "`steps`"),
         ([0.0, 0.0, 1.0], {"draws": 2**62}, geoshake.InvalidInputError, "do not fit in memory"),
         ([0.0, 0.0, 1.0], {"density": "uniform"}, geoshake.InvalidInputError, "density"),
     ],
@@ -180,6 +187,13 @@ def test_bad_input_is_refused_with_the_package_errors(q0, kw, error, says):
     with pytest.raises(error, match=None) as e:
         geoshake.sample(sphere, q0, **{"warmup": 10, "draws": 10, **kw})
     assert says in str(e.value), str(e.value)
+
+
+def test_a_bool_or_float_is_not_a_count():
+    sphere = geoshake.declare(SPHERE, kappa=0.0)
+    for kw in ({"max_tree_depth": True}, {"chains": 2.0}):
+        with pytest.raises(TypeError):
+            geoshake.sample(sphere, [0.0, 0.0, 1.0], draws=10, warmup=10, **kw)
 
 
 def test_a_system_the_sampler_cannot_take_is_refused():
