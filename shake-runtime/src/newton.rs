@@ -53,6 +53,18 @@
 //! kernel (the general one and the classical ones, slice and fixed-size)
 //! stops by this one rule.
 //!
+//! # Cheap Jacobians
+//!
+//! Where the Jacobian costs about as much as a residual (classical SHAKE:
+//! G(q1) A G0ᵀ, one more evaluation of g_q), a contraction that merely
+//! quarters is too slow to keep: two circles stepped at h|p|/r ≈ 0.3
+//! contract at θ ≈ 0.2 and took 13–20 updates per step, where Newton's
+//! quadratic convergence with a fresh Jacobian per update takes a few.
+//! Such a caller sets a horizon k (`Monitor::refresh_beyond`): the frozen
+//! Jacobian is kept only while ‖Δ‖ θ^k, the update its contraction would
+//! reach k updates on, is below the tolerance; otherwise a fresh one is
+//! asked for. Small steps, where θ is 10⁻³ or less, keep theirs.
+//!
 //! # Polish
 //!
 //! Rule 1 judges an update against x, not the residual against its own
@@ -115,6 +127,10 @@ pub(crate) struct Monitor {
     jacobian_near: bool,
     /// The round-off level of x, when the caller knows it (0 otherwise).
     floor: f64,
+    /// Simplified Newton whose Jacobian costs about a residual: keep a
+    /// frozen Jacobian only while its contraction reaches the tolerance
+    /// within this many more updates (`None`: whenever it quarters).
+    horizon: Option<i32>,
     pub(crate) iterations: usize,
 }
 
@@ -125,8 +141,19 @@ impl Monitor {
             prev_step: f64::INFINITY,
             jacobian_near: false,
             floor: 0.0,
+            horizon: None,
             iterations: 0,
         }
+    }
+
+    /// For a Jacobian about as cheap as a residual (classical SHAKE, where
+    /// it is G(q1) A G0ᵀ from one more evaluation of g_q): a frozen
+    /// Jacobian contracting at θ = ‖Δ_k‖/‖Δ_{k−1}‖ is kept only if
+    /// ‖Δ_k‖ θ^`updates` is below the tolerance, else a fresh one is asked
+    /// for (module docs, "Cheap Jacobians").
+    pub(crate) fn refresh_beyond(mut self, updates: i32) -> Self {
+        self.horizon = Some(updates);
+        self
     }
 
     /// An update no larger than `floor` is at round-off (rule 1): the
@@ -176,7 +203,11 @@ impl Monitor {
             return Verdict::Converged;
         }
         if step <= 0.25 * prev {
-            return Verdict::Continue;
+            let target = (self.opts.step_tolerance * x).max(self.floor);
+            let theta = step / prev;
+            if self.horizon.is_none_or(|k| step * theta.powi(k) <= target) {
+                return Verdict::Continue;
+            }
         }
         // The Jacobian the caller evaluates now is at an iterate whose
         // update was already tiny: it is from the quadratic regime.
@@ -262,6 +293,29 @@ mod tests {
         }
         assert!((x - 2f64.sqrt()).abs() <= f64::EPSILON * 2.0);
         assert!(mon.iterations <= 7, "{}", mon.iterations);
+    }
+
+    #[test]
+    fn a_cheap_jacobian_is_refreshed_unless_its_contraction_reaches_round_off_soon() {
+        // Contraction by 0.2 from 1e-2: quarters, so kept without a horizon
+        // (17 more updates to 4ε); with a horizon of 3 a fresh Jacobian.
+        let mut slow = Monitor::new(NewtonOptions::default());
+        let mut cheap = Monitor::new(NewtonOptions::default()).refresh_beyond(3);
+        for mon in [&mut slow, &mut cheap] {
+            assert_eq!(mon.update_frozen(1e-2, 1.0, true), Verdict::Continue);
+        }
+        assert_eq!(slow.update_frozen(2e-3, 1.0, false), Verdict::Continue);
+        assert_eq!(cheap.update_frozen(2e-3, 1.0, false), Verdict::Refresh);
+        // Contraction by 1e-4 from 1e-8: 1e-8 · 1e-12 is below 4ε within
+        // three updates, so the frozen Jacobian is kept.
+        let mut cheap = Monitor::new(NewtonOptions::default()).refresh_beyond(3);
+        assert_eq!(cheap.update_frozen(1e-4, 1.0, true), Verdict::Continue);
+        assert_eq!(cheap.update_frozen(1e-8, 1.0, false), Verdict::Continue);
+        // The floor counts as the tolerance: 1e-6 · 0.01³ is below it.
+        let mut cheap = Monitor::new(NewtonOptions::default()).refresh_beyond(3);
+        cheap.set_floor(1e-11);
+        assert_eq!(cheap.update_frozen(1e-4, 1.0, true), Verdict::Continue);
+        assert_eq!(cheap.update_frozen(1e-6, 1.0, false), Verdict::Continue);
     }
 
     #[test]

@@ -134,11 +134,16 @@ impl Band {
 
     /// Whether a banded factorisation pays: LU with partial pivoting fills
     /// U up to lower + upper diagonals, so the band (with its fill) must
-    /// cover well under half of the matrix. A tridiagonal band pays from
+    /// cover well under half of the matrix. A diagonal always pays (n
+    /// reciprocals, and it tells SHAKE its constraints are decoupled). A
+    /// tridiagonal band pays from
     /// three rows on: its kernel (`tridiagonal`) carries the recursion in
     /// registers, O(n) against the dense LU's O(n³) (a 4-link chain's
     /// SHAKE Jacobian and N).
     pub(crate) fn pays(self, n: usize) -> bool {
+        if self == (Band { lower: 0, upper: 0 }) {
+            return true;
+        }
         if self == (Band { lower: 1, upper: 1 }) {
             return n >= 3;
         }

@@ -177,7 +177,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
     let (mut r, mut u, mut dq, mut q1) = residual(sys, h, &q0, &p0, &kick, &g0, None);
     let mut lambda = 0.0f64;
     let mut lambda_first = 0.0f64;
-    let mut mon = Monitor::new(*opts);
+    let mut mon = Monitor::new(*opts).refresh_beyond(super::REFRESH_HORIZON);
     let mut fresh = true;
     let mut inv_j = f64::NAN;
     let mut r_first = 0.0;
@@ -244,22 +244,16 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize>(
             if at_floor {
                 break;
             }
-            if mon.iterations == 1 && lambda != 0.0 {
-                // The small root of r0 + r1 λ + r2 λ², exact for a distance
-                // constraint (parent module).
-                let (l1, r1) = (lambda, 1.0 / inv_j);
-                let r2 = r / (l1 * l1);
-                let disc = r1 * r1 - 4.0 * r0 * r2;
-                if disc >= 0.0 && r1 != 0.0 {
-                    let root = 2.0 * r0 / (-r1 - r1.signum() * disc.sqrt());
-                    if root.is_finite() {
-                        lambda = root;
-                        (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(lambda));
-                        mon.jump((root - l1).abs());
-                        fresh = false;
-                        continue;
-                    }
-                }
+            if mon.iterations == 1
+                && lambda != 0.0
+                && let Some(root) = super::fitted_root(r0, 1.0 / inv_j, lambda, r)
+            {
+                // Exact for a distance constraint (parent module).
+                mon.jump((root - lambda).abs());
+                lambda = root;
+                (r, u, dq, q1) = residual(sys, h, &q0, &p0, &kick, &g0, Some(lambda));
+                fresh = false;
+                continue;
             }
             // The one stopping rule of simplified Newton (`newton`).
             match verdict {

@@ -320,7 +320,8 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
     let mut jac = [[0.0; M]; M];
     let mut piv = [0usize; M];
     let band: Band = ws.jac_band;
-    let mut mon = Monitor::new(*opts);
+    let diagonal = band.lower == 0 && band.upper == 0;
+    let mut mon = Monitor::new(*opts).refresh_beyond(super::REFRESH_HORIZON);
     let mut fresh = true;
     let mut need_jacobian = true;
     let mut r_first = 0.0;
@@ -372,6 +373,7 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             mon.set_floor(step / r_first * norm_inf(&floor));
         }
         let verdict = mon.update_frozen(step, size, fresh);
+        let r0 = it.r;
         let cl = &ws.classical;
         it = residual::<S, D, M>(sys, h, &q0, &p0, &kick, &cl.g0, &cl.pattern, Some(&lambda));
         if !(step.is_finite() && size.is_finite()) {
@@ -379,6 +381,38 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         }
         if at_floor {
             break Ok(());
+        }
+        if diagonal && mon.iterations == 1 {
+            // Decoupled constraints: the fitted root of each, as the
+            // slice path takes them (`geoshake::classical::shake_step`).
+            let mut jump = 0.0f64;
+            let mut moved = false;
+            for i in 0..M {
+                let l1 = lambda[i];
+                if l1 != 0.0
+                    && let Some(root) = super::fitted_root(r0[i], 1.0 / jac[i][i], l1, it.r[i])
+                {
+                    lambda[i] = root;
+                    jump = jump.max((root - l1).abs());
+                    moved = true;
+                }
+            }
+            if moved {
+                let cl = &ws.classical;
+                it = residual::<S, D, M>(
+                    sys,
+                    h,
+                    &q0,
+                    &p0,
+                    &kick,
+                    &cl.g0,
+                    &cl.pattern,
+                    Some(&lambda),
+                );
+                mon.jump(jump);
+                fresh = false;
+                continue;
+            }
         }
         // The one stopping rule of simplified Newton (`newton`).
         match verdict {

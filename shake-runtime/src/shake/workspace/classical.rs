@@ -44,6 +44,9 @@ pub(crate) struct Buffers {
     pub(crate) hq: Vec<f64>,
     /// The round-off level of each g_i at the step's start.
     pub(crate) floor: Vec<f64>,
+    /// The residual at λ = 0, kept for the fitted roots of decoupled
+    /// constraints (`classical::fitted_root`).
+    pub(crate) r0: Vec<f64>,
     /// For one constraint of degree at most 2 (a distance), the nonzero
     /// entries (j, k, ∂²g/∂q_j∂q_k) of its constant Hessian: SHAKE's
     /// residual along its line is then the quadratic whose λ² coefficient
@@ -100,6 +103,7 @@ impl Buffers {
             w: vec![0.0; d],
             hq: vec![0.0; d],
             floor: vec![0.0; m],
+            r0: vec![0.0; m],
             g_qq: if classical && m == 1 {
                 constant_hessian(sys)
             } else {
