@@ -488,6 +488,20 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         res
     }
 
+    /// Takes over `other`'s record of the last state its `step_in_place`
+    /// returned and checked (finite, on M, ‖N‖₁ and det N there), so that
+    /// a `step_in_place` of this integrator from that state resumes instead
+    /// of checking it and factorising N again. For two integrators of one
+    /// system and options that differ in h alone (the sampler's steps
+    /// forward and back): N = {{H,g_i},g_j} does not depend on h.
+    pub(crate) fn adopt_checked(&mut self, other: &Self) {
+        self.checked.copy_from_slice(&other.checked);
+        self.checked_valid = other.checked_valid;
+        (self.checked_norm, self.checked_det) = (other.checked_norm, other.checked_det);
+        // Π of this integrator's own last state is not Π of that one.
+        (self.steps.map.show, self.steps.map.shown_fresh) = (false, false);
+    }
+
     /// One step: S_h(z) for SHAKE (z ∈ M), R_h(z) for RATTLE (z ∈ M^H).
     ///
     /// The input must lie on M to [`Options::constraint_tolerance`] (relative to g's scale);

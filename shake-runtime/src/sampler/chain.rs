@@ -5,8 +5,9 @@
 //! its last checked state: from the second step of a trajectory on,
 //! `step_in_place` resumes from it instead of checking the start and
 //! factorising N there again. The step back starts from the forward
-//! step's result, never from its own last one, and so always checks its
-//! start afresh: one such check per step, whichever integrator pays it.
+//! step's result, never from its own last one: it takes over the forward
+//! integrator's record of that state (`Integrator::adopt_checked`), so no
+//! step of a trajectory checks its start twice.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -356,6 +357,9 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         if !self.reverse_tolerance.is_finite() {
             return Ok(());
         }
+        // The step back starts where this step ended, which this step has
+        // just checked.
+        back.adopt_checked(step);
         self.back.clone_from(z);
         // Whatever stops the step back (its Newton, a degenerate N, a jump)
         // leaves the forward step not undone: a reversibility failure, not
