@@ -4,7 +4,8 @@
     target/shake-py-venv/bin/pip install mici
     target/shake-py-venv/bin/python examples/sampler.py [--quick]
 
-Prints one line per target, as `cargo run --release --example sampler`
+Prints one line per target (uniform and von Mises–Fisher on S², a torus in
+R⁴, matrix Fisher on SO(3) in R⁹), as `cargo run --release --example sampler`
 does, plus mici's effective samples per second and the ratio:
 
     sampler target=… dim=… constraints=… chains=… draws=… acceptance=…
@@ -126,6 +127,58 @@ def torus(kappa):
     )
 
 
+def rotation(kappa):
+    """Matrix Fisher on SO(3), π(R) ∝ e^{κ tr R} against Haar measure
+    (the Hausdorff measure of SO(3) in R⁹, R row-major, RᵀR = I by its six
+    entries): tr R = 1 + 2 cos θ with θ ∝ (1 − cos θ) e^{κ(1 + 2 cos θ)} on
+    [0, π], E[tr R] by quadrature."""
+    source = """struct Rotation {
+        parameters { kappa }
+        dof q[9], p[9];
+        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2 + p[3]^2 + p[4]^2 + p[5]^2
+            + p[6]^2 + p[7]^2 + p[8]^2) / 2 - kappa * (q[0] + q[4] + q[8]);
+        constraints {
+            c00: q[0]^2 + q[3]^2 + q[6]^2 - 1,
+            c11: q[1]^2 + q[4]^2 + q[7]^2 - 1,
+            c22: q[2]^2 + q[5]^2 + q[8]^2 - 1,
+            c01: q[0] * q[1] + q[3] * q[4] + q[6] * q[7],
+            c02: q[0] * q[2] + q[3] * q[5] + q[6] * q[8],
+            c12: q[1] * q[2] + q[4] * q[5] + q[7] * q[8],
+        }
+    }"""
+    theta = np.linspace(0.0, np.pi, 8193)
+    w = (1 - np.cos(theta)) * np.exp(kappa * (1 + 2 * np.cos(theta)))
+    exact = np.trapezoid(w * (1 + 2 * np.cos(theta)), theta) / np.trapezoid(w, theta)
+    pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+
+    def constr(q):
+        c = q.reshape(3, 3).T @ q.reshape(3, 3)
+        return np.array([c[i, j] - (i == j) for i, j in pairs])
+
+    def jacob(q):
+        # ∂(RᵀR)_ij/∂R_ab = δ_jb R_ai + δ_ib R_aj.
+        r, j = q.reshape(3, 3), np.zeros((6, 9))
+        for row, (a, b) in enumerate(pairs):
+            d = np.zeros((3, 3))
+            d[:, b] += r[:, a]
+            d[:, a] += r[:, b]
+            j[row] = d.ravel()
+        return j
+
+    return Target(
+        f"so3_matrix_fisher_k{kappa:g}",
+        source,
+        {"kappa": kappa},
+        np.eye(3).ravel(),
+        lambda q: -kappa * (q[0] + q[4] + q[8]),
+        lambda q: -kappa * np.eye(3).ravel(),
+        constr,
+        jacob,
+        lambda q: q[..., 0] + q[..., 4] + q[..., 8],
+        exact,
+    )
+
+
 def min_ess(q):
     return min(geoshake.ess_bulk(q[:, :, k]) for k in range(q.shape[2]))
 
@@ -171,7 +224,7 @@ def run_mici(t, dynamic):
 
 def main():
     failed = False
-    for t, dynamic in [(t, d) for d in (False, True) for t in [sphere(0.0), sphere(2.0), torus(1.5)]]:
+    for t, dynamic in [(t, d) for d in (False, True) for t in [sphere(0.0), sphere(2.0), torus(1.5), rotation(1.0)]]:
         s, ours_time = run_ours(t, dynamic)
         q = s["positions"]
         x = t.stat(q)
