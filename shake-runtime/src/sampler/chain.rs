@@ -22,6 +22,7 @@ use crate::system::ConstrainedSystem;
 
 use super::adapt::DualAveraging;
 use super::output::Rejection;
+use super::tree::TreeBuffers;
 use super::{SamplerOptions, MAX_STEP_SIZE};
 
 /// What one transition did.
@@ -85,6 +86,8 @@ pub(crate) struct Chain<S: ConstrainedSystem> {
     before: State,
     /// The step back from z.
     back: State,
+    /// Where dynamic trajectories are built, reused from one to the next.
+    pub(super) trees: TreeBuffers,
 }
 
 impl<S: ConstrainedSystem + Clone> Chain<S> {
@@ -125,6 +128,7 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             z: State::zeros(d),
             before: State::zeros(d),
             back: State::zeros(d),
+            trees: TreeBuffers::default(),
         }
     }
 

@@ -37,22 +37,6 @@ use super::output::Rejection;
 /// (Stan's and mici's default).
 const MAX_ENERGY_ERROR: f64 = 1000.0;
 
-/// A contiguous stretch of the trajectory.
-struct Tree {
-    /// Its earliest and latest states in the trajectory's time.
-    first: State,
-    last: State,
-    /// Σ p over its states.
-    p_sum: Vec<f64>,
-    /// log Σ e^{−(H − H₀)} over its states.
-    log_weight: f64,
-    /// The state drawn from it with probability ∝ e^{−H}, and H there.
-    sample: State,
-    sample_energy: f64,
-    /// Whether `sample` is z₀ itself.
-    sample_is_start: bool,
-}
-
 /// What the building of one trajectory saw.
 #[derive(Default)]
 struct Stats {
@@ -61,10 +45,6 @@ struct Stats {
     /// statistic for the adaptation is its mean.
     acceptance: f64,
     failure: Option<Rejection>,
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// log(e^a + e^b), exact for a or b = −∞.
@@ -77,70 +57,149 @@ fn log_add_exp(a: f64, b: f64) -> f64 {
     }
 }
 
-/// The trajectory keeps going: it has not turned back on itself.
-fn no_u_turn(p_sum: &[f64], p_first: &[f64], p_last: &[f64]) -> bool {
-    dot(p_sum, p_first) > 0.0 && dot(p_sum, p_last) > 0.0
+/// (a + b) · x, summed in the order of the coordinates.
+fn dot_of_sum(a: &[f64], b: &[f64], x: &[f64]) -> f64 {
+    a.iter().zip(b).zip(x).map(|((a, b), x)| (a + b) * x).sum()
+}
+
+/// The trajectory keeps going: with p♯_sum = a + b (formed term by term
+/// inside the dot products, so that a join needs no vector for it), it
+/// has not turned back on itself.
+fn no_u_turn(a: &[f64], b: &[f64], p_first: &[f64], p_last: &[f64]) -> bool {
+    dot_of_sum(a, b, p_first) > 0.0 && dot_of_sum(a, b, p_last) > 0.0
+}
+
+/// A contiguous stretch of the trajectory, as far as the sampling and the
+/// no-U-turn checks need it. Its buffers are reused from one subtree to
+/// the next: a leaf copies into them, a join adds or swaps into them.
+struct Tree {
+    /// Σ p over its states.
+    p_sum: Vec<f64>,
+    /// The momenta of its earliest and latest states in the trajectory's
+    /// time.
+    p_first: Vec<f64>,
+    p_last: Vec<f64>,
+    /// log Σ e^{−(H − H₀)} over its states.
+    log_weight: f64,
+    /// The state drawn from it with probability ∝ e^{−H}, and H there.
+    /// Not kept when it is z₀ (`sample_is_start`): the chain holds z₀.
+    sample: State,
+    sample_energy: f64,
+    /// Whether the state drawn is z₀ itself.
+    sample_is_start: bool,
+}
+
+/// The buffers a chain builds its trajectories in, kept across
+/// transitions: once the deepest tree so far has been built, a
+/// transition allocates nothing for its tree.
+pub(super) struct TreeBuffers {
+    /// The earliest and latest states of the whole trajectory: a doubling
+    /// steps on from one of them in place (a subtree's steps each start
+    /// where the previous one ended, so no other state is ever stepped).
+    first: State,
+    last: State,
+    /// `trees[0]` is the whole trajectory and `trees[1]` the subtree being
+    /// added to it. A subtree built into `trees[k]` builds its earlier
+    /// half (in the order of building) there too and its later half into
+    /// `trees[k + 1]`, then joins the two into `trees[k]`; the halves are
+    /// built one after the other, so one slot per level suffices and a
+    /// subtree of depth j uses `trees[1..=j + 1]`.
+    trees: Vec<Tree>,
+}
+
+impl Default for TreeBuffers {
+    fn default() -> Self {
+        TreeBuffers {
+            first: State::zeros(0),
+            last: State::zeros(0),
+            trees: Vec::new(),
+        }
+    }
 }
 
 impl Tree {
-    fn leaf(z: State, energy: f64, h0: f64, is_start: bool) -> Tree {
+    fn new(d: usize) -> Tree {
         Tree {
-            first: z.clone(),
-            last: z.clone(),
-            p_sum: z.p.as_slice().to_vec(),
-            log_weight: h0 - energy,
-            sample: z,
-            sample_energy: energy,
-            sample_is_start: is_start,
+            p_sum: vec![0.0; d],
+            p_first: vec![0.0; d],
+            p_last: vec![0.0; d],
+            log_weight: 0.0,
+            sample: State::zeros(d),
+            sample_energy: f64::NAN,
+            sample_is_start: false,
         }
     }
 
-    /// The tree made of `earlier` followed by `later`, its sample taken
-    /// from `later` when `take_later`, and whether it goes on: no U-turn
-    /// over the whole, nor across the join (Stan's extra checks: the
-    /// earlier half with the first state of the later one, and the later
-    /// half with the last state of the earlier one).
-    fn join(earlier: Tree, later: Tree, take_later: bool) -> (Tree, bool) {
-        let p_sum: Vec<f64> = earlier
-            .p_sum
-            .iter()
-            .zip(&later.p_sum)
-            .map(|(a, b)| a + b)
-            .collect();
-        let extended = |sum: &[f64], p: &State| -> Vec<f64> {
-            sum.iter().zip(p.p.as_slice()).map(|(a, b)| a + b).collect()
-        };
-        let goes_on = no_u_turn(&p_sum, earlier.first.p.as_slice(), later.last.p.as_slice())
-            && no_u_turn(
-                &extended(&earlier.p_sum, &later.first),
-                earlier.first.p.as_slice(),
-                later.first.p.as_slice(),
-            )
-            && no_u_turn(
-                &extended(&later.p_sum, &earlier.last),
-                earlier.last.p.as_slice(),
-                later.last.p.as_slice(),
-            );
-        let log_weight = log_add_exp(earlier.log_weight, later.log_weight);
-        let (sample, sample_energy, sample_is_start) = if take_later {
-            (later.sample, later.sample_energy, later.sample_is_start)
+    /// The trajectory of z₀ alone, with H(z₀) = h0.
+    fn set_start(&mut self, z0: &State, h0: f64) {
+        let p = z0.p.as_slice();
+        self.p_sum.copy_from_slice(p);
+        self.p_first.copy_from_slice(p);
+        self.p_last.copy_from_slice(p);
+        self.log_weight = h0 - h0;
+        self.sample_energy = h0;
+        self.sample_is_start = true;
+    }
+
+    /// The one state z, with H(z) = energy.
+    fn set_leaf(&mut self, z: &State, energy: f64, h0: f64) {
+        let p = z.p.as_slice();
+        self.p_sum.copy_from_slice(p);
+        self.p_first.copy_from_slice(p);
+        self.p_last.copy_from_slice(p);
+        self.log_weight = h0 - energy;
+        self.sample.clone_from(z);
+        self.sample_energy = energy;
+        self.sample_is_start = false;
+    }
+
+    /// Makes this tree the union of itself and `new`, the stretch built
+    /// next to it (later in time when `forward`, earlier otherwise), its
+    /// sample taken from `new` when `take_new`; `new` is left holding
+    /// stale buffers. Returns whether the union goes on: no U-turn over
+    /// the whole, nor across the join (Stan's extra checks: the earlier
+    /// half with the first state of the later one, and the later half with
+    /// the last state of the earlier one).
+    fn join(&mut self, new: &mut Tree, forward: bool, take_new: bool) -> bool {
+        let (earlier, later) = if forward {
+            (&*self, &*new)
         } else {
-            (
-                earlier.sample,
-                earlier.sample_energy,
-                earlier.sample_is_start,
-            )
+            (&*new, &*self)
         };
-        let tree = Tree {
-            first: earlier.first,
-            last: later.last,
-            p_sum,
-            log_weight,
-            sample,
-            sample_energy,
-            sample_is_start,
-        };
-        (tree, goes_on)
+        let goes_on = no_u_turn(
+            &earlier.p_sum,
+            &later.p_sum,
+            &earlier.p_first,
+            &later.p_last,
+        ) && no_u_turn(
+            &earlier.p_sum,
+            &later.p_first,
+            &earlier.p_first,
+            &later.p_first,
+        ) && no_u_turn(
+            &later.p_sum,
+            &earlier.p_last,
+            &earlier.p_last,
+            &later.p_last,
+        );
+        let log_weight = log_add_exp(earlier.log_weight, later.log_weight);
+        // Σ p of the union in place: one addition per coordinate rounds
+        // the same whichever half comes first in time.
+        for (s, n) in self.p_sum.iter_mut().zip(&new.p_sum) {
+            *s += n;
+        }
+        if forward {
+            std::mem::swap(&mut self.p_last, &mut new.p_last);
+        } else {
+            std::mem::swap(&mut self.p_first, &mut new.p_first);
+        }
+        self.log_weight = log_weight;
+        if take_new {
+            std::mem::swap(&mut self.sample, &mut new.sample);
+            self.sample_energy = new.sample_energy;
+            self.sample_is_start = new.sample_is_start;
+        }
+        goes_on
     }
 }
 
@@ -152,24 +211,51 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             Ok(h0) => h0,
             Err(t) => return t,
         };
+        // Out of the chain while the tree is built, since every step
+        // borrows the chain; the empty one left behind allocates nothing.
+        let mut buffers = std::mem::take(&mut self.trees);
+        let transition = self.build_trajectory(&mut buffers, h0, max_depth);
+        self.trees = buffers;
+        transition
+    }
+
+    /// The trajectory from z₀ = the chain's state, with H(z₀) = h0, built
+    /// in `buffers`, and the chain moved to the state drawn from it.
+    fn build_trajectory(
+        &mut self,
+        buffers: &mut TreeBuffers,
+        h0: f64,
+        max_depth: u32,
+    ) -> Transition {
+        let d = self.current.q.len();
+        if buffers.trees.is_empty() {
+            buffers.trees.push(Tree::new(d));
+        }
+        buffers.trees[0].set_start(&self.current, h0);
+        buffers.first.clone_from(&self.current);
+        buffers.last.clone_from(&self.current);
         let mut stats = Stats::default();
-        let mut tree = Tree::leaf(self.current.clone(), h0, h0, true);
         for depth in 0..max_depth {
+            // Made when first needed, so that a chain whose trees stay
+            // shallow does not pay for the depth limit.
+            while buffers.trees.len() < depth as usize + 2 {
+                buffers.trees.push(Tree::new(d));
+            }
             let forward: bool = self.rng.random();
-            let from = if forward { &tree.last } else { &tree.first };
-            let Some(new) = self.subtree(from.clone(), depth, forward, h0, &mut stats) else {
-                break;
+            let end = if forward {
+                &mut buffers.last
+            } else {
+                &mut buffers.first
             };
+            let (whole, new) = buffers.trees.split_at_mut(1);
+            if !self.subtree(new, end, depth, forward, h0, &mut stats) {
+                break;
+            }
+            let (whole, new) = (&mut whole[0], &mut new[0]);
             // Biased progressive sampling across the doubling.
             let u: f64 = self.rng.random();
-            let take_new = u < (new.log_weight - tree.log_weight).exp();
-            let (joined, goes_on) = if forward {
-                Tree::join(tree, new, take_new)
-            } else {
-                Tree::join(new, tree, !take_new)
-            };
-            tree = joined;
-            if !goes_on {
+            let take_new = u < (new.log_weight - whole.log_weight).exp();
+            if !whole.join(new, forward, take_new) {
                 break;
             }
         }
@@ -178,7 +264,8 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         } else {
             0.0
         };
-        let moved = !tree.sample_is_start;
+        let whole = &mut buffers.trees[0];
+        let moved = !whole.sample_is_start;
         // A trajectory that never left z₀ because its first step failed
         // is that failure's rejection; one whose draw fell on z₀ is the
         // multinomial analogue of a Metropolis rejection.
@@ -187,62 +274,66 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             (false, Some(kind)) if stats.steps <= 1 => Some(kind),
             (false, _) => Some(Rejection::Metropolis),
         };
-        let energy = tree.sample_energy;
         if moved {
-            self.current = tree.sample;
+            std::mem::swap(&mut self.current, &mut whole.sample);
         }
         Transition {
             accepted: moved,
             alpha,
-            energy,
+            energy: whole.sample_energy,
             steps: stats.steps,
             rejection,
             failed: stats.failure.is_some(),
         }
     }
 
-    /// The subtree of 2^depth steps from `from` (not included) in the
-    /// given direction, or None when it must be dropped: a U-turn inside
-    /// it, a divergence, a failed solve or check.
+    /// Builds into `trees[0]` the subtree of 2^depth steps from z (not
+    /// included) in the given direction, stepping z itself on to the
+    /// subtree's last state in the order of building, with `trees[1..]`
+    /// as room for its halves. False when the subtree must be dropped: a
+    /// U-turn inside it, a divergence, a failed solve or check (z and the
+    /// trees are then left part-built).
     fn subtree(
         &mut self,
-        from: State,
+        trees: &mut [Tree],
+        z: &mut State,
         depth: u32,
         forward: bool,
         h0: f64,
         stats: &mut Stats,
-    ) -> Option<Tree> {
+    ) -> bool {
         if depth == 0 {
-            let mut z = from;
             stats.steps += 1;
-            if let Err(kind) = self.checked_step_from(&mut z, forward) {
+            if let Err(kind) = self.checked_step_from(z, forward) {
                 stats.failure = Some(kind);
-                return None;
+                return false;
             }
-            let energy = self.energy(&z);
+            let energy = self.energy(z);
             if !energy.is_finite() {
                 stats.failure = Some(Rejection::NonFinite);
-                return None;
+                return false;
             }
             stats.acceptance += (h0 - energy).exp().min(1.0);
             if energy - h0 > MAX_ENERGY_ERROR {
-                return None;
+                return false;
             }
-            return Some(Tree::leaf(z, energy, h0, false));
+            trees[0].set_leaf(z, energy, h0);
+            return true;
         }
-        let inner = self.subtree(from, depth - 1, forward, h0, stats)?;
-        let next = if forward { &inner.last } else { &inner.first };
-        let outer = self.subtree(next.clone(), depth - 1, forward, h0, stats)?;
+        // The inner half into trees[0], then, from where it ended, the
+        // outer half into trees[1].
+        if !self.subtree(trees, z, depth - 1, forward, h0, stats)
+            || !self.subtree(&mut trees[1..], z, depth - 1, forward, h0, stats)
+        {
+            return false;
+        }
+        let (inner, outer) = trees.split_at_mut(1);
+        let (inner, outer) = (&mut inner[0], &mut outer[0]);
         // Uniform progressive sampling inside the subtree: the outer half
         // with probability W_outer / (W_inner + W_outer).
         let u: f64 = self.rng.random();
         let total = log_add_exp(inner.log_weight, outer.log_weight);
         let take_outer = u < (outer.log_weight - total).exp();
-        let (tree, goes_on) = if forward {
-            Tree::join(inner, outer, take_outer)
-        } else {
-            Tree::join(outer, inner, !take_outer)
-        };
-        goes_on.then_some(tree)
+        inner.join(outer, forward, take_outer)
     }
 }
