@@ -385,19 +385,8 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         if diagonal && mon.iterations == 1 {
             // Decoupled constraints: the fitted root of each, as the
             // slice path takes them (`geoshake::classical::shake_step`).
-            let mut jump = 0.0f64;
-            let mut moved = false;
-            for i in 0..M {
-                let l1 = lambda[i];
-                if l1 != 0.0
-                    && let Some(root) = super::fitted_root(r0[i], 1.0 / jac[i][i], l1, it.r[i])
-                {
-                    lambda[i] = root;
-                    jump = jump.max((root - l1).abs());
-                    moved = true;
-                }
-            }
-            if moved {
+            let roots = super::fitted_roots(&mut lambda, &r0, &it.r, |i| jac[i][i]);
+            if let Some(jump) = roots {
                 let cl = &ws.classical;
                 it = residual::<S, D, M>(
                     sys,

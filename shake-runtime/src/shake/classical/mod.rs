@@ -241,6 +241,31 @@ pub(crate) fn fitted_root(r0: f64, r1: f64, l1: f64, r_l1: f64) -> Option<f64> {
     root.is_finite().then_some(root)
 }
 
+/// [`fitted_root`] for each of several decoupled constraints (a diagonal
+/// SHAKE Jacobian, whose factors hold 1/J(0)_ii: `inv_j(i)`), from the
+/// residuals `r0` at λ = 0 and `r` at the first iterate λ1 (in `lambda`,
+/// replaced by the roots). A constraint with λ1_i = 0 or without a real
+/// root keeps λ1_i. Returns the largest move, `None` if nothing moved.
+#[inline(always)]
+pub(crate) fn fitted_roots(
+    lambda: &mut [f64],
+    r0: &[f64],
+    r: &[f64],
+    inv_j: impl Fn(usize) -> f64,
+) -> Option<f64> {
+    let mut jump = None;
+    for (i, l) in lambda.iter_mut().enumerate() {
+        let l1 = *l;
+        if l1 != 0.0
+            && let Some(root) = fitted_root(r0[i], 1.0 / inv_j(i), l1, r[i])
+        {
+            *l = root;
+            jump = Some(jump.unwrap_or(0.0f64).max((root - l1).abs()));
+        }
+    }
+    jump
+}
+
 /// [`quadratic_root`] on the slice path, at q̃ = `ws.z1` with r0 = `ws.g[0]`:
 /// G(q̃) packed, w = A(−G0ᵀ), then r1 and wᵀ g_qq w in the order of the
 /// fixed-size step's `slope` (the same bits).
@@ -414,20 +439,11 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
             // a better iterate than λ1 and the iteration goes on from it.
             // Either way the residual decides. (The factorised diagonal
             // Jacobian holds 1/J(0)_ii.)
-            let mut jump = 0.0f64;
-            let mut moved = false;
-            for i in 0..m {
-                let l1 = ws.lambda[i];
-                let r1 = 1.0 / ws.jac[i + i * m];
-                if l1 != 0.0
-                    && let Some(root) = fitted_root(ws.classical.r0[i], r1, l1, ws.g[i])
-                {
-                    ws.lambda[i] = root;
-                    jump = jump.max((root - l1).abs());
-                    moved = true;
-                }
-            }
-            if moved {
+            let inv_j = &ws.jac;
+            let roots = fitted_roots(&mut ws.lambda, &ws.classical.r0, &ws.g, |i| {
+                inv_j[i + i * m]
+            });
+            if let Some(jump) = roots {
                 residual(sys, h, ws, false);
                 mon.jump(jump);
                 fresh = false;
