@@ -10,12 +10,42 @@ use nalgebra::DVector;
 /// assert_eq!(z.dof(), 2);
 /// assert_eq!(z.p[1], 0.5);
 /// ```
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug, PartialEq)]
 pub struct State {
     /// Positions q ∈ R^d.
     pub q: DVector<f64>,
     /// Momenta p ∈ R^d.
     pub p: DVector<f64>,
+}
+
+impl Clone for State {
+    fn clone(&self) -> Self {
+        State {
+            q: self.q.clone(),
+            p: self.p.clone(),
+        }
+    }
+
+    /// Copies into the vectors already held when their lengths match
+    /// (the derived `clone_from` allocates two new ones): the sampler
+    /// copies states at every step.
+    ///
+    /// ```
+    /// use geoshake_runtime::State;
+    /// let mut z = State::zeros(2);
+    /// z.clone_from(&State::from_slices(&[1.0, 2.0], &[3.0, 4.0]));
+    /// assert_eq!(z.p[1], 4.0);
+    /// z.clone_from(&State::zeros(3));
+    /// assert_eq!(z.dof(), 3);
+    /// ```
+    fn clone_from(&mut self, other: &Self) {
+        if self.q.len() == other.q.len() && self.p.len() == other.p.len() {
+            self.q.copy_from(&other.q);
+            self.p.copy_from(&other.p);
+        } else {
+            *self = other.clone();
+        }
+    }
 }
 
 /// Why numbers given for a [`State`] do not make one: z = (q, p) needs

@@ -136,7 +136,12 @@ impl Tree {
         self.p_sum.copy_from_slice(p);
         self.p_first.copy_from_slice(p);
         self.p_last.copy_from_slice(p);
-        self.log_weight = h0 - h0;
+        // log e^{−(H − H₀)} at z₀ as at any leaf: 0, NaN when H₀ is not
+        // finite (as the leaf's own formula gives).
+        #[allow(clippy::eq_op)]
+        {
+            self.log_weight = h0 - h0;
+        }
         self.sample_energy = h0;
         self.sample_is_start = true;
     }
