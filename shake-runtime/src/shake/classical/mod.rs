@@ -37,19 +37,19 @@
 //!
 //! For one constraint of degree ≤ 2 (a distance, as the system declares,
 //! [`ConstrainedSystem::quadratic_constraints`]) r(λ) = r0 + r1 λ + r2 λ²
-//! exactly, r2 from g's constant Hessian read once: the first iterate is
-//! its small root (`quadratic_root`), on this path and on the fixed-size
-//! one with the same operations. For any other single constraint the
-//! first Newton iterate λ1 fits that quadratic through r(λ1) and its root
-//! is the next iterate. Several constraints whose Jacobian is diagonal
-//! (each g_i reads coordinates no other g_j reads, as two circles of a
-//! torus: the predicted band is 0) are decoupled, r_i depending on λ_i
-//! alone, and each takes its own fitted root the same way (`fitted_root`).
-//! Where the Jacobian is cheap to form (here: g_q once more, and one
-//! product), the frozen one is kept only while its contraction reaches
-//! round-off within `REFRESH_HORIZON` updates (`newton`, "Cheap
-//! Jacobians"): at h|p| ≈ 0.3 of a radius it contracts by only ≈ 0.2. The closed-form root is the equation's solution up
-//! to the rounding of its formula, not an iterate of Newton's, so at g's
+//! exactly, r2 from g's constant Hessian read once: the first iterate is its
+//! small root (`quadratic_root`), on this path and on the fixed-size one with
+//! the same operations. For any other single constraint the first Newton
+//! iterate λ1 fits that quadratic through r(λ1) and its root is the next
+//! iterate. Several constraints whose Jacobian is diagonal (each g_i reads
+//! coordinates no other g_j reads, as two circles of a torus: the predicted
+//! band is 0) are decoupled, r_i depending on λ_i alone, and each takes its
+//! own fitted root the same way (`fitted_root`). Where the Jacobian is cheap
+//! to form (here: g_q once more, and one product), the frozen one is kept
+//! only while its contraction reaches round-off within `REFRESH_HORIZON`
+//! updates (`newton`, "Cheap Jacobians"): at h|p| ≈ 0.3 of a radius it
+//! contracts by only ≈ 0.2. The closed-form root is the equation's solution
+//! up to the rounding of its formula, not an iterate of Newton's, so at g's
 //! round-off it is taken without a confirming update.
 //!
 //! # Projection and checks
