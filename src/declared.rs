@@ -195,6 +195,10 @@ impl ConstrainedSystem for DeclaredSystem {
         self.program.quadratic_constraints
     }
 
+    fn interpreted(&self) -> bool {
+        true
+    }
+
     fn kind(&self) -> ConstraintKind {
         match self.program.kind {
             Kind::None => ConstraintKind::None,

@@ -167,6 +167,17 @@ pub trait ConstrainedSystem: Hamiltonian {
         false
     }
 
+    /// Whether each evaluation runs an interpreter over the system's
+    /// expressions (a declaration read at run time, `geoshake::declared`)
+    /// rather than compiled code. A cost hint: kernels then reuse values
+    /// they already hold where compiled code would be as cheap to call
+    /// again (classical SHAKE forms its kick −G0ᵀλ from the G0 it keeps,
+    /// not by the closed-form fibre flow, which evaluates G0 anew). Results
+    /// agree to round-off either way. A wrapper forwards its inner system's.
+    fn interpreted(&self) -> bool {
+        false
+    }
+
     /// The structurally nonzero entries (i, k) of g_z (m × 2d), k < d for
     /// ∂g_i/∂q_k and k ≥ d for ∂g_i/∂p_{k−d}, sorted by i then k. Banded
     /// patterns (chains) let the runtime pick a structured solve.

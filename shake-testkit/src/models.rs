@@ -824,6 +824,9 @@ macro_rules! delegate {
             fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], n: &mut [f64]) {
                 self.0.nondegeneracy_matrix(q, p, n)
             }
+            fn interpreted(&self) -> bool {
+                self.0.interpreted()
+            }
             $($($more)*)?
         }
     };

@@ -351,6 +351,9 @@ impl<S: ConstrainedSystem> ConstrainedSystem for Gram<S> {
     fn quadratic_constraints(&self) -> bool {
         self.inner.quadratic_constraints()
     }
+    fn interpreted(&self) -> bool {
+        self.inner.interpreted()
+    }
     fn jacobian_pattern(&self) -> &[(usize, usize)] {
         self.inner.jacobian_pattern()
     }

@@ -110,26 +110,36 @@ pub(crate) fn classical<S: ConstrainedSystem, B: BaseMap>(sys: &S, base: &B) -> 
 /// `ws.z1[..d]`, r in `ws.g`.
 fn residual<S: ConstrainedSystem>(sys: &S, h: f64, ws: &mut Workspace, first: bool) {
     let d = ws.d;
-    ws.classical.u.copy_from_slice(&ws.classical.kick);
+    let cl = &mut ws.classical;
+    cl.u.copy_from_slice(&cl.kick);
     if !first {
         // u ← u − G0ᵀλ: the fibre flow's kick, in the system's closed form
-        // when it has one (straight-line code), else through the pattern.
+        // when it has compiled one (straight-line code), else through the
+        // pattern with the G0 in hand (an interpreted closed form would run
+        // its whole program for G0 again at every iterate).
         ws.y[..d].copy_from_slice(&ws.z0[..d]);
-        if !sys
-            .fibre_flow(&ws.lambda, &mut ws.y[..d], &mut ws.classical.u)
-            .applied()
+        if sys.interpreted()
+            || !sys
+                .fibre_flow(&ws.lambda, &mut ws.y[..d], &mut cl.u)
+                .applied()
         {
-            let cl = &mut ws.classical;
             for (&(i, k), g) in cl.pattern.iter().zip(&cl.g0) {
                 cl.u[k] -= g * ws.lambda[i];
             }
         }
     }
-    // p½ = p0 + u; Δq = h A p½ (grad_p is linear in p).
+    // p½ = p0 + u; Δq = h A p½ (grad_p is linear in p; for an
+    // interpreted system, A's diagonal when it is one).
     for k in 0..d {
-        ws.classical.v[k] = ws.z0[d + k] + ws.classical.u[k];
+        cl.v[k] = ws.z0[d + k] + cl.u[k];
     }
-    sys.grad_p(&ws.z0[..d], &ws.classical.v, &mut ws.classical.w);
+    if cl.mass.is_empty() || !sys.interpreted() {
+        sys.grad_p(&ws.z0[..d], &cl.v, &mut cl.w);
+    } else {
+        for ((w, a), v) in cl.w.iter_mut().zip(&cl.mass).zip(&cl.v) {
+            *w = a * v;
+        }
+    }
     for k in 0..d {
         ws.dz[k] = h * ws.classical.w[k];
         ws.z1[k] = ws.z0[k] + ws.dz[k];
