@@ -41,7 +41,9 @@ pub(super) fn band_lu_factor_w(
     kv: usize,
     piv: &mut [usize],
 ) -> Result<(), Singular> {
-    debug_assert!(a.len() >= n * n && piv.len() >= n);
+    // (Slices of the exact lengths: with n a constant (`small_n!`) the
+    // compiler then proves every index in bounds and unrolls.)
+    let (a, piv) = (&mut a[..n * n], &mut piv[..n]);
     for k in 0..n {
         let last_row = (k + kl).min(n - 1);
         let last_col = (k + kv).min(n - 1);
@@ -104,6 +106,7 @@ pub(super) fn band_lu_solve_w(
     piv: &[usize],
     b: &mut [f64],
 ) {
+    let (lu, piv, b) = (&lu[..n * n], &piv[..n], &mut b[..n]);
     // b ← L_k⁻¹ P_k b for k = 0, 1, …
     for k in 0..n {
         let p = piv[k];

@@ -52,6 +52,8 @@ pub(crate) fn lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<()
 /// The dense LU of [`lu_factor`] (rows swapped across the whole matrix).
 #[inline(always)]
 pub(crate) fn dense_lu_factor(a: &mut [f64], n: usize, piv: &mut [usize]) -> Result<(), Singular> {
+    // (Exact lengths: with n a constant the indices are proved in bounds.)
+    let (a, piv) = (&mut a[..n * n], &mut piv[..n]);
     for k in 0..n {
         // Pivot: the largest entry of column k on or below the diagonal.
         let mut p = k;
@@ -99,6 +101,7 @@ pub(crate) fn lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 /// The dense part of [`lu_solve`].
 #[inline(always)]
 pub(crate) fn dense_lu_solve(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    let (lu, piv, b) = (&lu[..n * n], &piv[..n], &mut b[..n]);
     for k in 0..n {
         b.swap(k, piv[k]);
     }
