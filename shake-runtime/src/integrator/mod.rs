@@ -447,6 +447,16 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// assert!(g[0].abs() < 1e-15);
     /// ```
     pub fn step_in_place(&mut self, z: &mut State) -> Result<StepInfo, StepError> {
+        self.step_in_place_projecting(z, self.method == Method::Rattle)
+    }
+
+    /// [`step_in_place`](Self::step_in_place), with Π (R_h) or without
+    /// (S_h).
+    fn step_in_place_projecting(
+        &mut self,
+        z: &mut State,
+        project: bool,
+    ) -> Result<StepInfo, StepError> {
         self.check_dims(z)?;
         let d = self.system.dof();
         if self.steps.map.fast_paths
@@ -470,7 +480,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         self.out_p.copy_from_slice(z.p.as_slice());
         let mut q = std::mem::take(&mut self.out_q);
         let mut p = std::mem::take(&mut self.out_p);
-        let res = self.advance(&mut q, &mut p, self.method == Method::Rattle, 1, self.h);
+        let res = self.advance(&mut q, &mut p, project, 1, self.h);
         if res.is_ok() {
             z.q.as_mut_slice().copy_from_slice(&q);
             z.p.as_mut_slice().copy_from_slice(&p);
@@ -500,6 +510,20 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         (self.checked_norm, self.checked_det) = (other.checked_norm, other.checked_det);
         // Π of this integrator's own last state is not Π of that one.
         (self.steps.map.show, self.steps.map.shown_fresh) = (false, false);
+    }
+
+    /// S_h(z) in place, whatever this integrator's method: for RATTLE the
+    /// step without its Π, with every check of the new state that R_h
+    /// makes (its solve, on M, N's condition, fibre and component jumps),
+    /// so it fails exactly where R_h(z) would. For a caller that reads only
+    /// the new positions, which S_h and R_h share (the sampler's step
+    /// back, which must return to the start of the step it checks). On
+    /// error z is left unchanged.
+    pub(crate) fn shake_in_place(&mut self, z: &mut State) -> Result<(), StepError> {
+        let res = self.step_in_place_projecting(z, false).map(|_| ());
+        // z is S_h(z), off M^H for RATTLE: no step resumes from it.
+        self.checked_valid = false;
+        res
     }
 
     /// One step: S_h(z) for SHAKE (z ∈ M), R_h(z) for RATTLE (z ∈ M^H).
@@ -544,5 +568,51 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
         };
         self.steps
             .advance(&self.system, &mut self.guard, self.h, q, p, project, at)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::examples::Pendulum;
+    use crate::{ConstrainedSystem, Integrator, State, StormerVerlet};
+
+    /// `shake_in_place` (the sampler's step back) is S_h: R_h's positions
+    /// bit for bit, its momenta before Π (off M^H), on each path the step
+    /// can take; and it fails where R_h fails, leaving z as it was.
+    #[test]
+    fn shake_in_place_has_the_positions_of_the_rattle_step() {
+        for (fast, fixed) in [(true, true), (true, false), (false, true)] {
+            let make = |h: f64| {
+                Integrator::new(Pendulum::default(), StormerVerlet, h)
+                    .fast_paths(fast)
+                    .fixed_size(fixed)
+                    .rattle()
+            };
+            let (mut r, mut s) = (make(0.1), make(0.1));
+            let mut z = r
+                .project_to_hidden(&State::from_slices(&[0.6, -0.8], &[1.0, 1.0]))
+                .unwrap();
+            for _ in 0..50 {
+                let zr = r.step(&z).unwrap();
+                let mut zs = z.clone();
+                s.shake_in_place(&mut zs).unwrap();
+                assert_eq!(zs.q, zr.q, "fast {fast}, fixed {fixed}");
+                let mut gh = [0.0];
+                r.system()
+                    .hidden_constraints(zs.q.as_slice(), zs.p.as_slice(), &mut gh);
+                assert!(gh[0].abs() > 1e-6, "Π was applied: {gh:?}");
+                z = zr;
+            }
+            // h|p| ≈ 100 times the rod: no solution near the start.
+            let (mut r, mut s) = (make(50.0), make(50.0));
+            let z = r
+                .project_to_hidden(&State::from_slices(&[0.6, -0.8], &[1.6, 1.2]))
+                .unwrap();
+            let e = r.step(&z).unwrap_err();
+            let mut zs = z.clone();
+            let es = s.shake_in_place(&mut zs).unwrap_err();
+            assert_eq!(std::mem::discriminant(&e), std::mem::discriminant(&es));
+            assert_eq!(zs, z);
+        }
     }
 }

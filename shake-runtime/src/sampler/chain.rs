@@ -362,13 +362,18 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
             return Ok(());
         }
         // The step back starts where this step ended, which this step has
-        // just checked.
+        // just checked. Only its positions are compared (`reverse_ok`), so
+        // it is S_h without Π, which R_h's positions are; but with all of
+        // R_h's checks: a move x → y must pass the same tests as y → x
+        // (the forward step's fibre-jump check, applied to the step back
+        // too), else detailed balance fails (the wavy curve at h = 0.5 in
+        // tests/suite/sampler.rs, biased by 4.5 standard errors).
         back.adopt_checked(step);
         self.back.clone_from(z);
         // Whatever stops the step back (its Newton, a degenerate N, a jump)
         // leaves the forward step not undone: a reversibility failure, not
         // a failure of the forward trajectory.
-        back.step_in_place(&mut self.back)
+        back.shake_in_place(&mut self.back)
             .map_err(|_| Rejection::Reverse)?;
         if reverse_ok(
             self.before.q.as_slice(),
