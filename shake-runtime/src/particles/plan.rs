@@ -32,7 +32,27 @@ pub struct FamilyClusters {
     /// and it has a fixed-size kernel (`cluster::shake_fixed`); set by
     /// [`FamilyClusters::detect_shape`].
     pub(crate) fixed: Option<(u8, u8)>,
+    /// Runs of consecutive clusters whose particles and members lie in
+    /// disjoint, increasing index ranges, so that the runs can be solved on
+    /// separate threads, each writing its own slices of q, p and ν; set by
+    /// [`FamilyClusters::detect_blocks`]. Empty: one run of every cluster.
+    pub(crate) blocks: Vec<Block>,
 }
+
+/// Clusters `clusters.0..clusters.1` of a family, whose particles lie in
+/// `particles.0..particles.1` and members (rows of the family's table) in
+/// `members.0..members.1`; the ranges of successive blocks tile `0..n`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Block {
+    pub(crate) clusters: (usize, usize),
+    pub(crate) particles: (usize, usize),
+    pub(crate) members: (usize, usize),
+}
+
+/// Clusters per block, about: enough work per block (rigid water: a
+/// block is ~0.1 ms) that handing it to a thread costs little, enough
+/// blocks in a box of 10⁴ molecules to share among cores.
+pub(crate) const BLOCK_CLUSTERS: usize = 256;
 
 impl FamilyClusters {
     /// The number of clusters.
@@ -62,6 +82,67 @@ impl FamilyClusters {
             self.fixed = Some((mc as u8, np as u8));
         }
     }
+    /// Sets [`FamilyClusters::blocks`]: cuts after a cluster where every
+    /// particle and member of the clusters so far has a lower index than
+    /// every one of the clusters after it, once a block holds at least
+    /// `target` clusters. The clusters are the connected components of
+    /// the family, so no particle or member is in two of them; a box
+    /// whose molecules are numbered one after the other (as data files
+    /// number them) is cut everywhere, an interleaved numbering perhaps
+    /// nowhere (one block: solved on one thread). Which blocks there are
+    /// changes no result: each cluster is solved on its own.
+    pub(crate) fn detect_blocks(&mut self, particles: usize, members: usize, target: usize) {
+        self.blocks.clear();
+        let n = self.len();
+        if n == 0 {
+            return;
+        }
+        let target = target.max(1);
+        let lowest = |c: usize| {
+            let ps = &self.particles
+                [self.particle_start[c] as usize..self.particle_start[c + 1] as usize];
+            let ms =
+                &self.members[self.member_start[c] as usize..self.member_start[c + 1] as usize];
+            (
+                ps.iter().copied().min().unwrap_or(u32::MAX) as usize,
+                ms.iter().copied().min().unwrap_or(u32::MAX) as usize,
+            )
+        };
+        // The lowest particle and member index from cluster c on.
+        let mut after = vec![(usize::MAX, usize::MAX); n + 1];
+        for c in (0..n).rev() {
+            let (p, m) = lowest(c);
+            after[c] = (after[c + 1].0.min(p), after[c + 1].1.min(m));
+        }
+        let (mut start, mut top_p, mut top_m) = (0, 0, 0);
+        let mut lo = (0, 0);
+        for c in 0..n {
+            let ps = &self.particles
+                [self.particle_start[c] as usize..self.particle_start[c + 1] as usize];
+            let ms =
+                &self.members[self.member_start[c] as usize..self.member_start[c + 1] as usize];
+            top_p = ps.iter().map(|&i| i as usize + 1).fold(top_p, usize::max);
+            top_m = ms.iter().map(|&i| i as usize + 1).fold(top_m, usize::max);
+            let last = c + 1 == n;
+            let cut = c + 1 - start >= target && top_p <= after[c + 1].0 && top_m <= after[c + 1].1;
+            if cut || last {
+                let hi = if last {
+                    (particles, members)
+                } else {
+                    (top_p, top_m)
+                };
+                self.blocks.push(Block {
+                    clusters: (start, c + 1),
+                    particles: (lo.0, hi.0),
+                    members: (lo.1, hi.1),
+                });
+                (start, lo) = (c + 1, hi);
+            }
+        }
+        if self.blocks.len() == 1 {
+            self.blocks.clear();
+        }
+    }
     /// Bytes held.
     pub(crate) fn bytes(&self) -> usize {
         (self.members.capacity()
@@ -70,6 +151,7 @@ impl FamilyClusters {
             + self.particle_start.capacity())
             * 4
             + self.slots.capacity()
+            + self.blocks.capacity() * std::mem::size_of::<Block>()
     }
 }
 
@@ -121,4 +203,99 @@ pub(crate) enum FailureKind {
     SingularNewton,
     SingularN,
     NotFinite,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Clusters of two members each on the particle lists given, members
+    /// numbered in cluster order unless `members` says otherwise.
+    fn plan(particles: &[Vec<u32>], members: &[[u32; 2]]) -> FamilyClusters {
+        let mut f = FamilyClusters {
+            member_start: vec![0],
+            particle_start: vec![0],
+            ..Default::default()
+        };
+        for (ps, ms) in particles.iter().zip(members) {
+            f.members.extend_from_slice(ms);
+            f.particles.extend_from_slice(ps);
+            f.member_start.push(f.members.len() as u32);
+            f.particle_start.push(f.particles.len() as u32);
+        }
+        f
+    }
+
+    /// The blocks tile the clusters, the particles and the members in
+    /// order, and every cluster's particles and members lie in its block's
+    /// ranges: the disjoint slices the threads write.
+    fn check_tiling(f: &FamilyClusters, particles: usize, members: usize) {
+        let mut next = Block::default();
+        for b in &f.blocks {
+            assert_eq!(b.clusters.0, next.clusters.1);
+            assert_eq!(b.particles.0, next.particles.1);
+            assert_eq!(b.members.0, next.members.1);
+            for c in b.clusters.0..b.clusters.1 {
+                let ps =
+                    &f.particles[f.particle_start[c] as usize..f.particle_start[c + 1] as usize];
+                let ms = &f.members[f.member_start[c] as usize..f.member_start[c + 1] as usize];
+                assert!(ps
+                    .iter()
+                    .all(|&i| (b.particles.0..b.particles.1).contains(&(i as usize))));
+                assert!(ms
+                    .iter()
+                    .all(|&i| (b.members.0..b.members.1).contains(&(i as usize))));
+            }
+            next = *b;
+        }
+        assert_eq!(next.clusters.1, f.len());
+        assert_eq!((next.particles.1, next.members.1), (particles, members));
+    }
+
+    #[test]
+    fn molecules_numbered_in_turn_are_cut_into_blocks_that_tile() {
+        let n = 10;
+        let parts: Vec<Vec<u32>> = (0..n).map(|c| vec![3 * c, 3 * c + 1, 3 * c + 2]).collect();
+        let mems: Vec<[u32; 2]> = (0..n).map(|c| [2 * c, 2 * c + 1]).collect();
+        let mut f = plan(&parts, &mems);
+        f.detect_blocks(3 * n as usize + 5, 2 * n as usize, 3);
+        // Cuts after 3, 6 and 9 clusters; the last block takes the rest
+        // and the particles no cluster holds.
+        assert_eq!(f.blocks.len(), 4);
+        assert_eq!(f.blocks[3].clusters, (9, 10));
+        check_tiling(&f, 3 * n as usize + 5, 2 * n as usize);
+    }
+
+    #[test]
+    fn interleaved_numberings_are_cut_only_where_no_cluster_straddles() {
+        let n = 8u32;
+        // Clusters 0..4 interleave their particles with clusters 4..8:
+        // cluster c holds c and c + 8 for c < 4; the rest are in turn.
+        let parts: Vec<Vec<u32>> = (0..n)
+            .map(|c| {
+                if c < 4 {
+                    vec![c, c + 8]
+                } else {
+                    vec![2 * c + 4, 2 * c + 5]
+                }
+            })
+            .collect();
+        let mems: Vec<[u32; 2]> = (0..n).map(|c| [2 * c, 2 * c + 1]).collect();
+        let mut f = plan(&parts, &mems);
+        f.detect_blocks(20, 16, 1);
+        assert!(f
+            .blocks
+            .iter()
+            .all(|b| b.clusters.1 <= 4 || b.clusters.0 >= 4));
+        assert_eq!(f.blocks[0].clusters, (0, 4));
+        check_tiling(&f, 20, 16);
+        // Members numbered against the clusters' order: no cut at all.
+        let rev: Vec<[u32; 2]> = (0..n)
+            .map(|c| [2 * (n - 1 - c), 2 * (n - 1 - c) + 1])
+            .collect();
+        let parts: Vec<Vec<u32>> = (0..n).map(|c| vec![2 * c, 2 * c + 1]).collect();
+        let mut f = plan(&parts, &rev);
+        f.detect_blocks(16, 16, 1);
+        assert!(f.blocks.is_empty());
+    }
 }

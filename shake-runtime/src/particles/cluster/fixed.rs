@@ -139,8 +139,8 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
     }
     let (mut x0, mut x, mut pl, mut wx) = ([0.0; NX], [0.0; NX], [0.0; NX], [0.0; NX]);
     for s in 0..NP {
-        let i = parts[s] as usize;
-        let (a0, aq, ap) = (&args.q0[i * d..], &q[i * d..], &p[i * d..]);
+        let (i, j) = (parts[s] as usize, parts[s] as usize - w.base);
+        let (a0, aq, ap) = (&args.q0[i * d..], &q[j * d..], &p[j * d..]);
         let wi = args.inv_mass[i];
         for k in 0..d {
             x0[s * d + k] = a0[k];
@@ -176,7 +176,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
     let mut nu = [0.0; MC];
     if let (true, Some(st)) = (w.warm, w.store.as_deref()) {
         for m in 0..MC {
-            nu[m] = st[members[m] as usize];
+            nu[m] = st[members[m] as usize - w.mbase];
             axpy_block::<S, NX>(&sl[m], nu[m], &wg0[m], &mut x);
         }
     }
@@ -296,12 +296,12 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
         it += 1;
     }
     for s in 0..NP {
-        let i = parts[s] as usize;
-        q[i * d..i * d + d].copy_from_slice(&x[s * d..s * d + d]);
+        let j = parts[s] as usize - w.base;
+        q[j * d..j * d + d].copy_from_slice(&x[s * d..s * d + d]);
     }
     if let Some(st) = w.store.as_deref_mut() {
         for m in 0..MC {
-            st[members[m] as usize] = nu[m];
+            st[members[m] as usize - w.mbase] = nu[m];
         }
     }
     if args.inv_h == 0.0 {
@@ -387,8 +387,8 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
         w.max_hidden = w.max_hidden.max(worst);
     }
     for s in 0..NP {
-        let i = parts[s] as usize;
-        p[i * d..i * d + d].copy_from_slice(&pl[s * d..s * d + d]);
+        let j = parts[s] as usize - w.base;
+        p[j * d..j * d + d].copy_from_slice(&pl[s * d..s * d + d]);
     }
     Ok(())
 }
@@ -402,6 +402,7 @@ pub(super) fn shake_fixed_all<S: Stencil, const MC: usize, const NP: usize, cons
     plan: &FamilyClusters,
     args: &ClusterArgs<'_>,
     fuse: bool,
+    clusters: std::ops::Range<usize>,
     q: &mut [f64],
     p: &mut [f64],
 ) -> Result<(), ClusterFailure> {
@@ -410,7 +411,7 @@ pub(super) fn shake_fixed_all<S: Stencil, const MC: usize, const NP: usize, cons
         wg0d: [[0.0; NX]; MC],
         grd: [[0.0; NX]; MC],
     };
-    for c in 0..plan.len() {
+    for c in clusters {
         shake_fixed::<S, MC, NP, NX>(w, &mut f, c, stencil, table, plan, args, fuse, q, p)?;
     }
     Ok(())

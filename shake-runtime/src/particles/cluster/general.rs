@@ -138,6 +138,10 @@ pub(super) struct Work<'a> {
     /// `warm`, written after each cluster converges).
     pub(super) store: Option<&'a mut [f64]>,
     pub(super) warm: bool,
+    /// The first particle and member of the block: `q`, `p` and `store`
+    /// hold the block's entries only (q[(i − base)·D..] is particle i's).
+    pub(super) base: usize,
+    pub(super) mbase: usize,
     pub(super) l: Local,
     pub(super) wg0: [f64; MAX_CLUSTER * ML],
     pub(super) lu: [f64; MAX_CLUSTER * MAX_CLUSTER],
@@ -172,6 +176,8 @@ pub(super) fn shake_one<S: Stencil>(
     let Work {
         store,
         warm,
+        base,
+        mbase,
         l,
         wg0,
         lu,
@@ -200,10 +206,10 @@ pub(super) fn shake_one<S: Stencil>(
     let slots = &plan.slots[m0 * ar..m1 * ar];
     debug_assert_eq!(mc, members.len());
     for (s, &i) in parts.iter().enumerate() {
-        let i = i as usize;
+        let (i, j) = (i as usize, i as usize - *base);
         x0[s * d..(s + 1) * d].copy_from_slice(&args.q0[i * d..(i + 1) * d]);
-        l.x[s * d..(s + 1) * d].copy_from_slice(&q[i * d..(i + 1) * d]);
-        l.pl[s * d..(s + 1) * d].copy_from_slice(&p[i * d..(i + 1) * d]);
+        l.x[s * d..(s + 1) * d].copy_from_slice(&q[j * d..(j + 1) * d]);
+        l.pl[s * d..(s + 1) * d].copy_from_slice(&p[j * d..(j + 1) * d]);
         l.wm[s] = args.inv_mass[i];
     }
     // W G(x0).
@@ -225,7 +231,7 @@ pub(super) fn shake_one<S: Stencil>(
     // so Newton starts near the solution: x ← x̃ − W G(x0)ᵀ ν_prev.
     if let (true, Some(st)) = (*warm, store.as_deref()) {
         for m in 0..mc {
-            let v = st[members[m] as usize];
+            let v = st[members[m] as usize - *mbase];
             nu[m] = v;
             let sm = &slots[m * ar..(m + 1) * ar];
             let vm = &wg0[m * wd..(m + 1) * wd];
@@ -353,12 +359,12 @@ pub(super) fn shake_one<S: Stencil>(
         it += 1;
     }
     for (s, &i) in parts.iter().enumerate() {
-        let i = i as usize;
-        q[i * d..(i + 1) * d].copy_from_slice(&l.x[s * d..(s + 1) * d]);
+        let j = i as usize - *base;
+        q[j * d..(j + 1) * d].copy_from_slice(&l.x[s * d..(s + 1) * d]);
     }
     if let Some(st) = store.as_deref_mut() {
         for m in 0..mc {
-            st[members[m] as usize] = nu[m];
+            st[members[m] as usize - *mbase] = nu[m];
         }
     }
     if args.inv_h != 0.0 {
@@ -391,8 +397,8 @@ pub(super) fn shake_one<S: Stencil>(
             }
         }
         for (s, &i) in parts.iter().enumerate() {
-            let i = i as usize;
-            p[i * d..(i + 1) * d].copy_from_slice(&l.pl[s * d..(s + 1) * d]);
+            let j = i as usize - *base;
+            p[j * d..(j + 1) * d].copy_from_slice(&l.pl[s * d..(s + 1) * d]);
         }
     }
     Ok(())
