@@ -8,6 +8,8 @@
 //!
 //! - `run_us`: the library's `run`, every state projected onto M^H and
 //!   shown to the driver (stride 1, nothing stored), per step;
+//! - `observed_us`: the same run with an `on_step` observer that counts
+//!   the steps (what a progress bar's hook costs at least), per step;
 //! - `step_us`: the library's single `step_in_place`, per step;
 //! - `limit_us`: the hand-written RATTLE step;
 //! - `ratio` = run_us / limit_us;
@@ -98,6 +100,7 @@ fn time_us(steps: u64, mut f: impl FnMut()) -> f64 {
 
 struct Row {
     run_us: f64,
+    observed_us: f64,
     step_us: f64,
     limit_us: f64,
     max_rel_g: f64,
@@ -115,7 +118,7 @@ fn library<S: ConstrainedSystem + Clone>(
     z0: &State,
     steps: u64,
     rel_g: impl Fn(&State) -> f64,
-) -> (f64, f64, f64, f64, State, f64) {
+) -> (f64, f64, f64, f64, f64, State, f64) {
     let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
     let run_us = time_us(steps, || {
         let out = integ
@@ -124,6 +127,20 @@ fn library<S: ConstrainedSystem + Clone>(
             .execute();
         assert!(out.error.is_none(), "{:?}", out.error);
     });
+    let mut seen = 0u64;
+    let mut count = |_: &geoshake::StepEvent| {
+        seen += 1;
+        std::ops::ControlFlow::Continue(())
+    };
+    let observed_us = time_us(steps, || {
+        let out = integ
+            .run(z0.clone(), Stop::Steps(steps))
+            .store(false)
+            .on_step(&mut count)
+            .execute();
+        assert!(out.error.is_none(), "{:?}", out.error);
+    });
+    std::hint::black_box(seen);
     let step_us = time_us(steps, || {
         let mut z = z0.clone();
         for _ in 0..steps {
@@ -161,6 +178,7 @@ fn library<S: ConstrainedSystem + Clone>(
     assert!(out.error.is_none());
     (
         run_us,
+        observed_us,
         step_us,
         max_g,
         de,
@@ -176,7 +194,7 @@ fn pendulum(steps: u64) -> Row {
     let p0 = [length * om * th.cos(), length * om * th.sin()];
     let z0 = State::from_slices(&q0, &p0);
     let lim = LimitPendulum { length, gravity };
-    let (run_us, step_us, max_rel_g, de, last, iterations) = library(
+    let (run_us, observed_us, step_us, max_rel_g, de, last, iterations) = library(
         geoshake::models::Pendulum::new(length, gravity),
         &z0,
         steps,
@@ -201,6 +219,7 @@ fn pendulum(steps: u64) -> Row {
     let dz = State::from_slices(&q, &p).distance(&last);
     Row {
         run_us,
+        observed_us,
         step_us,
         limit_us,
         max_rel_g,
@@ -218,7 +237,7 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
     let (q0, p0) = limit_chain_state(N, length);
     let z0 = State::from_slices(&q0, &p0);
     let mut lim = LimitChain::<N>::new(length, gravity);
-    let (run_us, step_us, max_rel_g, de, last, iterations) =
+    let (run_us, observed_us, step_us, max_rel_g, de, last, iterations) =
         library(sys, &z0, steps, |z| lim.relative_g(z.q.as_slice()));
     let (mut q, mut p) = (q0.clone(), p0.clone());
     let limit_us = time_us(steps, || {
@@ -242,6 +261,7 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
     let dz = State::from_slices(&q, &p).distance(&last);
     Row {
         run_us,
+        observed_us,
         step_us,
         limit_us,
         max_rel_g,
@@ -256,11 +276,13 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
 
 fn print(name: &str, r: &Row) {
     println!(
-        "overhead system={name} run_us={:.4} step_us={:.4} limit_us={:.4} ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e} iters={:.2} limit_iters={:.2}",
+        "overhead system={name} run_us={:.4} observed_us={:.4} step_us={:.4} limit_us={:.4} ratio={:.2} observed_ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e} iters={:.2} limit_iters={:.2}",
         r.run_us,
+        r.observed_us,
         r.step_us,
         r.limit_us,
         r.run_us / r.limit_us,
+        r.observed_us / r.limit_us,
         r.max_rel_g,
         r.limit_rel_g,
         r.de,

@@ -1,11 +1,12 @@
 //! A run of a system with a fixed-size classical step loops inside that
-//! step (the runtime's `run::lane`) when nothing watches every
-//! step; with an `on_step` observer it takes the driver's own loop, one
-//! step at a time through the integrator. Both loops call the same
+//! step (the runtime's `run::lane`), with or without an `on_step`
+//! observer; told to (`through_driver`), it takes the driver's own loop,
+//! one step at a time through the integrator. Both loops call the same
 //! substep, so the two runs must agree bit for bit: the stored states,
-//! the observed ones, and on failure the error, its step and time, and
-//! the states stored up to it (for a lazily projected run with a stride,
-//! the driver's replay of the steps after the last stored one).
+//! the observed ones, the events `on_step` sees, a run the observer stops,
+//! and on failure the error, its step and time, and the states stored up
+//! to it (for a lazily projected run with a stride, the driver's replay of
+//! the steps after the last stored one).
 //!
 //! No timing here: `examples/overhead.rs` times the run.
 
@@ -29,16 +30,27 @@ struct Setup {
 
 type Seen = Vec<(u64, f64, Vec<f64>, Vec<f64>)>;
 
-/// The run of `setup` from `z0`, through the lane (`watched` false) or the
-/// driver's loop (`watched`: an `on_step` observer that never stops it).
+/// What watches every step: nobody, an `on_step` observer that records
+/// each event, or one that also stops the run after the given step.
+#[derive(Copy, Clone, Debug, PartialEq)]
+enum Watch {
+    Nobody,
+    Every,
+    StopAfter(u64),
+}
+
+/// The run of `setup` from `z0`, through the lane or, with `driver`, the
+/// driver's loop; the states the observer saw and the events `on_step` saw.
+#[allow(clippy::too_many_arguments)]
 fn run<S: ConstrainedSystem + Clone>(
     sys: &S,
     z0: &State,
     h: f64,
     steps: u64,
     s: Setup,
-    watched: bool,
-) -> (RunOutcome, Seen) {
+    driver: bool,
+    watch: Watch,
+) -> (RunOutcome, Seen, Vec<StepEvent>) {
     let mut integ = Integrator::new(sys.clone(), StormerVerlet, h).compensated(s.compensated);
     integ = match s.method {
         "shake" => integ.shake(),
@@ -53,19 +65,29 @@ fn run<S: ConstrainedSystem + Clone>(
         }
     };
     let mut seen = Seen::new();
-    let mut every = |_: &StepEvent| ControlFlow::Continue(());
-    let run = integ
+    let mut events = Vec::new();
+    let mut every = |e: &StepEvent| {
+        events.push(*e);
+        match watch {
+            Watch::StopAfter(k) if e.step == k => ControlFlow::Break(()),
+            _ => ControlFlow::Continue(()),
+        }
+    };
+    let mut run = integ
         .run(z0.clone(), Stop::Steps(steps))
         .start_time(0.25)
         .stride(s.stride)
         .store(s.store)
         .observe(|k, t, z| seen.push((k, t, z.q.as_slice().to_vec(), z.p.as_slice().to_vec())));
-    let out = if watched {
-        run.on_step(&mut every).execute()
-    } else {
+    if driver {
+        run = run.through_driver();
+    }
+    let out = if watch == Watch::Nobody {
         run.execute()
+    } else {
+        run.on_step(&mut every).execute()
     };
-    (out, seen)
+    (out, seen, events)
 }
 
 /// Every setup on `sys` from `z0` with step `h`: the two loops agree.
@@ -88,10 +110,22 @@ fn agree<S: ConstrainedSystem + Clone>(
                     store,
                     compensated,
                 };
-                let (lane, lane_seen) = run(sys, z0, h, steps, s, false);
-                let (driver, driver_seen) = run(sys, z0, h, steps, s, true);
+                let (lane, lane_seen, _) = run(sys, z0, h, steps, s, false, Watch::Nobody);
+                let (driver, driver_seen, events) = run(sys, z0, h, steps, s, true, Watch::Every);
                 assert_eq!(lane, driver, "{name}, h {h}, {s:?}");
                 assert_eq!(lane_seen, driver_seen, "{name}, h {h}, {s:?}");
+                // Watched, the lane calls `on_step` as the driver does.
+                let watched = run(sys, z0, h, steps, s, false, Watch::Every);
+                assert_eq!(
+                    watched,
+                    (driver, driver_seen, events),
+                    "{name}, h {h}, {s:?}"
+                );
+                // And stops where it is told to, the state stored.
+                let stop = Watch::StopAfter(steps / 3 + 1);
+                let stopped = run(sys, z0, h, steps, s, false, stop);
+                let driven = run(sys, z0, h, steps, s, true, stop);
+                assert_eq!(stopped, driven, "{name}, h {h}, {s:?}");
                 if store {
                     assert_eq!(lane.trajectory.len(), lane_seen.len(), "{name}, {s:?}");
                 } else {
@@ -276,7 +310,7 @@ type Pendulum = geoshake::models::Pendulum;
 type Double = geoshake::models::DoublePendulum;
 
 #[test]
-fn a_run_takes_the_lane_unless_every_step_is_watched() {
+fn a_run_takes_the_lane_watched_or_not() {
     let s = Setup {
         method: "lazy",
         stride: 3,
@@ -285,20 +319,40 @@ fn a_run_takes_the_lane_unless_every_step_is_watched() {
     };
     let pendulum = Counted::new(Pendulum::new(1.0, 9.81), (2, 1));
     let double = Counted::new(Double::new(1.0, 0.7, 9.81), (4, 2));
-    for watched in [false, true] {
-        let (out, _) = run(&pendulum, &pendulum_start(), 0.01, 40, s, watched);
+    for (driver, watch) in [
+        (false, Watch::Nobody),
+        (false, Watch::Every),
+        (true, Watch::Every),
+    ] {
+        let (out, ..) = run(&pendulum, &pendulum_start(), 0.01, 40, s, driver, watch);
         assert!(out.error.is_none());
-        let (out, _) = run(&double, &double_start(), 0.01, 40, s, watched);
+        let (out, ..) = run(&double, &double_start(), 0.01, 40, s, driver, watch);
         assert!(out.error.is_none());
     }
     // (The run's start evaluates nothing through the hook.) One call for
-    // the run through the lane, then one a step: one to eight constraints
-    // take the lane.
-    assert_eq!(pendulum.calls(), 1 + 40, "one constraint");
-    assert_eq!(double.calls(), 1 + 40, "two constraints");
+    // each run through the lane, watched or not, then one a step through
+    // the driver: one to eight constraints take the lane.
+    assert_eq!(pendulum.calls(), 2 + 40, "one constraint");
+    assert_eq!(double.calls(), 2 + 40, "two constraints");
     // And the lane's run of the wrapper is the system's own.
-    let (a, _) = run(&pendulum, &pendulum_start(), 0.01, 40, s, false);
-    let (b, _) = run(&pendulum.sys, &pendulum_start(), 0.01, 40, s, false);
+    let (a, ..) = run(
+        &pendulum,
+        &pendulum_start(),
+        0.01,
+        40,
+        s,
+        false,
+        Watch::Nobody,
+    );
+    let (b, ..) = run(
+        &pendulum.sys,
+        &pendulum_start(),
+        0.01,
+        40,
+        s,
+        false,
+        Watch::Nobody,
+    );
     assert_eq!(a, b);
 }
 
@@ -319,8 +373,10 @@ fn an_overflowing_projection_ends_both_loops_alike() {
                 store: true,
                 compensated: true,
             };
-            let (lane, seen_lane) = run(&sys, &pendulum_start(), 0.01, 200, s, false);
-            let (driver, seen_driver) = run(&sys, &pendulum_start(), 0.01, 200, s, true);
+            let (lane, seen_lane, _) =
+                run(&sys, &pendulum_start(), 0.01, 200, s, false, Watch::Nobody);
+            let (driver, seen_driver, _) =
+                run(&sys, &pendulum_start(), 0.01, 200, s, true, Watch::Every);
             assert_eq!(lane, driver, "{s:?}");
             assert_eq!(seen_lane, seen_driver, "{s:?}");
             let e = lane.error.expect("Π overflows");

@@ -2,9 +2,8 @@
 //! the loop of [`Run::execute`](crate::Run::execute) for the common case,
 //! where every step is one fixed-size classical substep
 //! (`step::classical`) and a stored
-//! state needs nothing but its Π, the observer and the push (no `on_step`
-//! observer, no diagnostics, one substep a step, the fast paths and fixed
-//! sizes on).
+//! state needs nothing but its Π, the observers and the push (no
+//! diagnostics, one substep a step, the fast paths and fixed sizes on).
 //!
 //! The driver's loop reaches the substep through six calls (the step's
 //! composition, the integrator, the substep map and its classical step,
@@ -30,6 +29,7 @@ use crate::base_map::BaseMap;
 use crate::error::StepError;
 use crate::guard::Guard;
 use crate::report::{RunSummary, StepInfo};
+use crate::run::event::{StepEvent, StepObserver};
 use crate::state::State;
 use crate::step::classical::{fits, fixed_step, Substep};
 use crate::step::map::StepMap;
@@ -43,6 +43,9 @@ use crate::trajectory::Trajectory;
 pub(crate) struct Lane<'a> {
     pub(crate) first: u64,
     pub(crate) last: u64,
+    /// The run's observer of every step, called after each as the
+    /// driver's loop calls it (`steps` = `last`).
+    pub(crate) on_step: Option<&'a mut StepObserver<'a>>,
     pub(crate) stride: u64,
     pub(crate) t0: f64,
     /// A RATTLE run that steps with SHAKE and shows Π of the states it
@@ -82,6 +85,9 @@ pub(crate) enum LaneEnd {
         last_recorded: u64,
         error: StepError,
     },
+    /// The `on_step` observer ended the run after step `k`, whose state is
+    /// left in (q, p), unstored unless `last_recorded` = k.
+    Stopped { k: u64, last_recorded: u64 },
 }
 
 /// The steps of `lane` from (q, p), in place, each the substep
@@ -169,6 +175,7 @@ fn run<S: ConstrainedSystem, const D: usize, const M: usize>(
     let Lane {
         first,
         last,
+        mut on_step,
         stride,
         t0,
         lazy,
@@ -235,6 +242,20 @@ fn run<S: ConstrainedSystem, const D: usize, const M: usize>(
                 traj.push(k, shown.q.as_slice(), shown.p.as_slice());
             }
             last_recorded = k;
+        }
+        if let Some(f) = on_step.as_deref_mut() {
+            let event = StepEvent {
+                step: k,
+                steps: last,
+                t,
+                info,
+            };
+            if f(&event).is_break() {
+                *end = LaneEnd::Stopped { k, last_recorded };
+                cx.q.copy_from_slice(&q);
+                cx.p.copy_from_slice(&p);
+                return Ok(info);
+            }
         }
     }
     *end = LaneEnd::Done;

@@ -11,9 +11,9 @@
 //!
 //! The step itself is the [`step`](crate::step) maps'; the checks are the
 //! [`guard`](crate::guard)'s. A run of a system with a fixed-size
-//! classical step (one substep a step, fast paths and fixed sizes on),
-//! with no `on_step` observer and no diagnostics, loops inside that step
-//! (`lane`) and comes back here only to end:
+//! classical step (one substep a step, fast paths and fixed sizes on) and
+//! no diagnostics loops inside that step (`lane`), calling the `on_step`
+//! observer there, and comes back here only to end:
 //! the same steps and stored states, without the layers between this
 //! loop and the substep (`tests/suite/run_lane.rs`).
 
@@ -22,6 +22,8 @@ pub(crate) mod lane;
 pub(crate) mod stepper;
 
 pub use event::{StepEvent, StepObserver};
+
+use std::ops::ControlFlow;
 
 use crate::diagnostics::Accumulator;
 use crate::error::StepError;
@@ -111,6 +113,9 @@ pub struct Run<'a, T, F> {
     t0: f64,
     observer: F,
     on_step: Option<&'a mut StepObserver<'a>>,
+    /// Never loop inside the fixed-size step (`lane`): the tests that
+    /// compare the two loops set it.
+    driver_only: bool,
     /// Set when the run was refused while it was being set up (a start
     /// state that is not even a state): `execute` returns it.
     refused: Option<StepError>,
@@ -129,6 +134,7 @@ impl<'a, T> Run<'a, T, fn(u64, f64, &State)> {
             t0: 0.0,
             observer: |_, _, _| {},
             on_step: None,
+            driver_only: false,
             refused: None,
         }
     }
@@ -213,6 +219,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             refused: self.refused,
             observer,
             on_step: self.on_step,
+            driver_only: self.driver_only,
         }
     }
 
@@ -245,6 +252,15 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
         self
     }
 
+    /// Takes every step through the driver's own loop, never the loop
+    /// inside a fixed-size classical step (`run::lane`), which takes the
+    /// same steps faster. For tests that compare the two loops.
+    #[doc(hidden)]
+    pub fn through_driver(mut self) -> Self {
+        self.driver_only = true;
+        self
+    }
+
     /// Runs, and returns everything computed, with the error that stopped
     /// the run early if any. On an error the last good state is stored (and
     /// observed) even when it is not on the stride.
@@ -265,6 +281,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             t0,
             mut observer,
             mut on_step,
+            driver_only,
             refused,
         } = self;
         let mut traj = Trajectory::default();
@@ -379,11 +396,18 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
         // step that failed, with what this loop would hold there.
         let mut first = 1;
         let mut handed = None;
-        if n > 0 && on_step.is_none() {
+        if n > 0 && !driver_only {
             let mut end = LaneEnd::default();
+            // (A relay: the lane's borrow of the observer ends with it.)
+            let watched = on_step.is_some();
+            let mut relay = |e: &StepEvent| match on_step.as_mut() {
+                Some(f) => f(e),
+                None => ControlFlow::Continue(()),
+            };
             let lane = Lane {
                 first: 1,
                 last: n,
+                on_step: watched.then_some(&mut relay as &mut StepObserver<'_>),
                 stride,
                 t0,
                 lazy,
@@ -416,6 +440,34 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 } => {
                     (first, last_recorded) = (k, last);
                     handed = Some(error);
+                }
+                // Stopped by the `on_step` observer after step k, whose
+                // state is in (q, p): it ends the trajectory, as below.
+                LaneEnd::Stopped {
+                    k,
+                    last_recorded: last,
+                } => {
+                    if last != k
+                        && let Err(e) = integ.record(
+                            &q,
+                            &p,
+                            per_step,
+                            k,
+                            t0 + k as f64 * h,
+                            &mut acc,
+                            &mut traj,
+                            store,
+                            &mut observer,
+                            &mut scratch,
+                        )
+                    {
+                        return fail(traj, summary, e);
+                    }
+                    return RunOutcome {
+                        trajectory: traj,
+                        summary,
+                        error: None,
+                    };
                 }
             }
         }
