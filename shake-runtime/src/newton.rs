@@ -65,6 +65,18 @@
 //! reach k updates on, is below the tolerance; otherwise a fresh one is
 //! asked for. Small steps, where θ is 10⁻³ or less, keep theirs.
 //!
+//! # Iterations judged by their residual
+//!
+//! The particle path's solves (each cluster's SHAKE, the coupled solve of
+//! a chain) know a relative tolerance for the residual itself, |g_i| /
+//! (|∇g_i| · extent_i) ≤ tol, and judge iterates by it. The caller decides
+//! convergence (where the scale is taken is its own); `Residuals` says
+//! what a residual still above the tolerance means: non-finite, the
+//! budget spent or a millionfold growth over the first residual (a
+//! diverging iteration, stopped before the budget), both `NotConverged`;
+//! otherwise a contraction slower than ½ per iteration (the residual is
+//! linear in g) asks a simplified Newton for a fresh Jacobian.
+//!
 //! # Polish
 //!
 //! Rule 1 judges an update against x, not the residual against its own
@@ -221,6 +233,77 @@ impl Monitor {
     }
 }
 
+/// What [`Residuals::judge`] says of an iterate whose residual is above
+/// the tolerance.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub(crate) enum Rate {
+    /// The residual at least halved since the previous iterate.
+    Fast,
+    /// It did not: a simplified Newton should evaluate its Jacobian here.
+    Slow,
+    /// The residual is NaN or infinite.
+    NonFinite,
+    /// The budget is spent, or the residual has grown a millionfold over
+    /// the first one.
+    NotConverged,
+}
+
+impl Rate {
+    /// Whether the contraction is slow; `None` when the iteration failed.
+    #[inline(always)]
+    pub(crate) fn slow(self) -> Option<bool> {
+        match self {
+            Rate::Fast => Some(false),
+            Rate::Slow => Some(true),
+            Rate::NonFinite | Rate::NotConverged => None,
+        }
+    }
+}
+
+/// The rule of the iterations judged by their residual (module docs).
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct Residuals {
+    max_iterations: usize,
+    first: f64,
+    prev: f64,
+}
+
+/// Growth of the residual over the first one at which an iteration counts
+/// as diverging.
+const DIVERGENCE: f64 = 1e6;
+
+impl Residuals {
+    pub(crate) fn new(max_iterations: usize) -> Self {
+        Residuals {
+            max_iterations,
+            first: f64::NAN,
+            prev: f64::INFINITY,
+        }
+    }
+
+    /// `worst`, the largest relative residual of the iterate after
+    /// `updates` updates, is above the tolerance: what to do.
+    #[inline(always)]
+    pub(crate) fn judge(&mut self, worst: f64, updates: usize) -> Rate {
+        if !worst.is_finite() {
+            return Rate::NonFinite;
+        }
+        if updates == 0 {
+            self.first = worst;
+        }
+        if updates >= self.max_iterations || worst > DIVERGENCE * self.first {
+            return Rate::NotConverged;
+        }
+        let slow = worst > 0.5 * self.prev;
+        self.prev = worst;
+        if slow {
+            Rate::Slow
+        } else {
+            Rate::Fast
+        }
+    }
+}
+
 /// What [`Polish::judge`] says about a converged iteration.
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub(crate) enum Finish {
@@ -278,6 +361,24 @@ impl Polish {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn residuals_ask_for_a_jacobian_when_the_contraction_slows_and_stop_on_divergence() {
+        let mut r = Residuals::new(5);
+        // The first iterate is never slow; halving or better is fast.
+        assert_eq!(r.judge(1.0, 0), Rate::Fast);
+        assert_eq!(r.judge(0.5, 1), Rate::Fast);
+        assert_eq!(r.judge(0.3, 2), Rate::Slow);
+        assert_eq!(r.judge(f64::NAN, 3), Rate::NonFinite);
+        assert_eq!(r.judge(f64::INFINITY, 3), Rate::NonFinite);
+        // The budget: 5 updates done and still above the tolerance.
+        assert_eq!(r.judge(1e-3, 5), Rate::NotConverged);
+        // A millionfold growth over the first residual, within the budget.
+        let mut r = Residuals::new(50);
+        assert_eq!(r.judge(2.0, 0), Rate::Fast);
+        assert_eq!(r.judge(1.9e6, 1), Rate::Slow);
+        assert_eq!(r.judge(2.1e6, 2), Rate::NotConverged);
+    }
 
     #[test]
     fn newton_for_sqrt2_stops_at_round_off() {

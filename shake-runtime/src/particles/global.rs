@@ -7,6 +7,7 @@ use super::graph::{self, Numbering};
 use super::plan::ClusterArgs;
 use super::ParticleSystem;
 use crate::error::{SolveError, Stage, StepError};
+use crate::newton::{Rate, Residuals};
 use crate::report::StepInfo;
 use crate::solver::SpdSolver;
 
@@ -224,7 +225,7 @@ impl Global {
             self.nu.fill(0.0);
         }
         let mut it = 0;
-        let mut first = f64::NAN;
+        let mut rate = Residuals::new(args.max_iter);
         loop {
             for (f, fam) in system.constraint_families().iter().enumerate() {
                 let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
@@ -243,26 +244,24 @@ impl Global {
                     worst_c = c;
                 }
             }
-            if !worst.is_finite() {
-                let source = SolveError::NonFinite { iterations: it };
-                return Err(num.error_at(system, worst_c, stage, k, time, source));
-            }
             if worst <= args.tol {
                 report.residual = Some(worst);
                 report.shake_iterations = it;
                 report.shake_iterations_total = it as u64;
                 break;
             }
-            if it == 0 {
-                first = worst;
-            }
-            // A simplified Newton that has grown the residual a millionfold
-            // is diverging: stop before the budget.
-            if it >= args.max_iter || worst > 1e6 * first {
-                let source = SolveError::NotConverged {
+            // N(q0) is kept whatever the contraction: a fresh factor is a
+            // factorisation of the whole system, and the contraction per
+            // iteration is O(h²|v|²/l²) from the predictor.
+            let source = match rate.judge(worst, it) {
+                Rate::Fast | Rate::Slow => None,
+                Rate::NonFinite => Some(SolveError::NonFinite { iterations: it }),
+                Rate::NotConverged => Some(SolveError::NotConverged {
                     iterations: it,
                     residual: worst,
-                };
+                }),
+            };
+            if let Some(source) = source {
                 return Err(num.error_at(system, worst_c, stage, k, time, source));
             }
             // g is re-evaluated next iteration: solve in its buffer.

@@ -808,12 +808,14 @@ fn power_of_two_near(x: f64) -> f64 {
     f64::from_bits(x.to_bits() & 0x7ff0_0000_0000_0000)
 }
 
-/// Particles per chunk of the passes over every particle that run on
-/// threads (the drift, the closing kick, the finiteness checks).
+/// The chunk of the passes over every particle that run on threads:
+/// particles per chunk of the drift, entries (particles × D) per chunk of
+/// the closing kick and the finiteness checks.
 const PARALLEL_PARTICLES: usize = 8192;
 
-/// True when a pass over `n` entries is worth handing to threads: more
-/// than one chunk of [`PARALLEL_PARTICLES`], and more than one thread.
+/// True when a pass over `n` items (particles or entries, as the pass
+/// counts them) is worth handing to threads: more than one chunk of
+/// [`PARALLEL_PARTICLES`], and more than one thread.
 /// Each entry is computed as on one thread, so the numbers do not depend
 /// on the number of threads.
 fn parallel(n: usize) -> bool {

@@ -3,6 +3,7 @@
 //! loop is unrolled and every array lives in registers or L1.
 
 use super::*;
+use crate::newton::Residuals;
 use crate::particles::stencil::member_scale;
 use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
@@ -185,7 +186,7 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
     let mut jinv = [0.0; 9];
     let mut it = 0;
     let mut need_jac = true;
-    let mut prev = f64::INFINITY;
+    let mut rate = Residuals::new(args.max_iter);
     // The residual is judged against the scale at the iterate judged, never
     // at x0 alone: from far off M, x0's scale is the far point's and would
     // pass a result still off M. The scale is taken on the first pass and
@@ -250,28 +251,16 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             }
         }
         rescale = false;
-        if !worst.is_finite() || it >= args.max_iter {
-            return Err(ClusterFailure {
-                member: members[worst_j] as usize,
-                residual: worst,
-                iterations: it,
-                kind: if worst.is_finite() {
-                    FailureKind::NotConverged
-                } else {
-                    FailureKind::NotFinite
-                },
-            });
-        }
-        // Contraction slower than ½ per iteration (the residual is linear
-        // in g): the Jacobian at this iterate.
-        if !need_jac && worst > 0.5 * prev {
+        let failed = || unsolved(members[worst_j] as usize, worst, it);
+        let slow = rate.judge(worst, it).slow().ok_or_else(failed)?;
+        // A slow contraction with a kept Jacobian: the one at this iterate.
+        if !need_jac && slow {
             for j in 0..MC {
                 gather_fixed::<S, NX>(&sl[j], &x, &mut xm);
                 stencil.gradient(&xm[..wd], data[j], &mut gr[j][..wd]);
             }
             need_jac = true;
         }
-        prev = worst;
         if need_jac {
             for j in 0..MC {
                 for m in 0..MC {

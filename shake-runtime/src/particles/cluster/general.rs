@@ -3,6 +3,7 @@
 //! each cluster gathered into a local copy and solved by exact Newton.
 
 use super::*;
+use crate::newton::Residuals;
 use crate::particles::stencil::member_scale;
 use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
@@ -245,7 +246,7 @@ pub(super) fn shake_one<S: Stencil>(
     }
     let mut it = 0;
     let mut need_jac = true;
-    let mut prev = f64::INFINITY;
+    let mut rate = Residuals::new(args.max_iter);
     loop {
         // g at the current iterate (and G when the Jacobian is due). The
         // residual is judged against the scale at this iterate, never at
@@ -286,21 +287,11 @@ pub(super) fn shake_one<S: Stencil>(
             *iters += it as u64;
             break;
         }
-        if !worst.is_finite() || it >= args.max_iter {
-            return Err(ClusterFailure {
-                member: members[worst_j] as usize,
-                residual: worst,
-                iterations: it,
-                kind: if worst.is_finite() {
-                    FailureKind::NotConverged
-                } else {
-                    FailureKind::NotFinite
-                },
-            });
-        }
-        if !need_jac && worst > 0.5 * prev {
-            // Poor contraction (slower than ½, the residual being linear
-            // in g): the Jacobian at this iterate.
+        let failed = || unsolved(members[worst_j] as usize, worst, it);
+        let slow = rate.judge(worst, it).slow().ok_or_else(failed)?;
+        if !need_jac && slow {
+            // A slow contraction with a kept Jacobian: the one at this
+            // iterate.
             for j in 0..if fuse { 0 } else { mc } {
                 let sj = &slots[j * ar..(j + 1) * ar];
                 gather_member::<S>(sj, &l.x, &mut l.xm);
@@ -309,7 +300,6 @@ pub(super) fn shake_one<S: Stencil>(
             }
             need_jac = true;
         }
-        prev = worst;
         if need_jac {
             // J = G(x) W G(x0)ᵀ.
             for j in 0..mc {

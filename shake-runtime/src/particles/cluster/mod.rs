@@ -53,6 +53,23 @@ fn coupling_w<S: Stencil>(sj: &[u8], gj: &[f64], sl: &[u8], vl: &[f64]) -> f64 {
     v
 }
 
+/// A cluster whose Newton iteration stopped unsolved
+/// ([`Rate::NonFinite`](crate::newton::Rate) or `NotConverged`) at
+/// `member`, with its residual after `iterations` updates.
+#[cold]
+fn unsolved(member: usize, residual: f64, iterations: usize) -> ClusterFailure {
+    ClusterFailure {
+        member,
+        residual,
+        iterations,
+        kind: if residual.is_finite() {
+            FailureKind::NotConverged
+        } else {
+            FailureKind::NotFinite
+        },
+    }
+}
+
 pub(crate) mod dense;
 mod fixed;
 mod general;
