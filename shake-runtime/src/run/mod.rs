@@ -368,18 +368,24 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
             (q.clone(), p.clone())
         };
         let mut acc = Accumulator::default();
-        if let Err(e) = integ.record(
-            &q,
-            &p,
-            per_step,
-            0,
-            t0,
-            &mut acc,
-            &mut traj,
-            store,
-            &mut observer,
-            &mut scratch,
-        ) {
+        // Stores (and shows) the state in (q, p) as step k at time t.
+        macro_rules! record {
+            ($k:expr, $t:expr) => {
+                integ.record(
+                    &q,
+                    &p,
+                    per_step,
+                    $k,
+                    $t,
+                    &mut acc,
+                    &mut traj,
+                    store,
+                    &mut observer,
+                    &mut scratch,
+                )
+            };
+        }
+        if let Err(e) = record!(0, t0) {
             return fail(traj, summary, e);
         }
         let mut last_recorded = 0;
@@ -448,18 +454,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                     last_recorded: last,
                 } => {
                     if last != k
-                        && let Err(e) = integ.record(
-                            &q,
-                            &p,
-                            per_step,
-                            k,
-                            t0 + k as f64 * h,
-                            &mut acc,
-                            &mut traj,
-                            store,
-                            &mut observer,
-                            &mut scratch,
-                        )
+                        && let Err(e) = record!(k, t0 + k as f64 * h)
                     {
                         return fail(traj, summary, e);
                     }
@@ -543,18 +538,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 Err(e) => end_before!(e.at(k, t0 + k as f64 * h)),
             };
             if on_stride {
-                if let Err(e) = integ.record(
-                    &q,
-                    &p,
-                    per_step,
-                    k,
-                    t,
-                    &mut acc,
-                    &mut traj,
-                    store,
-                    &mut observer,
-                    &mut scratch,
-                ) {
+                if let Err(e) = record!(k, t) {
                     // Step k's state could not be stored (its projection
                     // failed): the trajectory ends before step k.
                     end_before!(e.at(k, t));
@@ -571,20 +555,7 @@ impl<'a, T: Stepper, F: FnMut(u64, f64, &State)> Run<'a, T, F> {
                 if f(&event).is_break() {
                     // Stopped by the observer: the trajectory ends at the
                     // state it saw.
-                    if !on_stride
-                        && let Err(e) = integ.record(
-                            &q,
-                            &p,
-                            per_step,
-                            k,
-                            t,
-                            &mut acc,
-                            &mut traj,
-                            store,
-                            &mut observer,
-                            &mut scratch,
-                        )
-                    {
+                    if !on_stride && let Err(e) = record!(k, t) {
                         return fail(traj, summary, e);
                     }
                     break;
