@@ -77,6 +77,18 @@
 //! otherwise a contraction slower than ½ per iteration (the residual is
 //! linear in g) asks a simplified Newton for a fresh Jacobian.
 //!
+//! A tolerance can lie below what the coordinates can resolve: each
+//! coordinate x of a converged iterate is rounded by up to ε|x|, which
+//! moves a member's relative residual by up to ε ‖x_member‖ / extent (a
+//! bond of length 1 at 10⁵ from the origin: ≈ 1e-11, above a tolerance of
+//! 1e-12). There the residual stops going down and wanders at that level
+//! whatever the iteration does. An iterate whose residual did not go down
+//! (not below the previous one) and whose every member is within the
+//! tolerance or its own round-off floor (the caller's test,
+//! `tolerance::roundoff_floor`) is accepted as `RoundOff`: converged as
+//! far as f64 can tell, its residual reported as it is. An iteration still contracting,
+//! however slowly, is never stopped by this rule.
+//!
 //! # Polish
 //!
 //! Rule 1 judges an update against x, not the residual against its own
@@ -241,6 +253,9 @@ pub(crate) enum Rate {
     Fast,
     /// It did not: a simplified Newton should evaluate its Jacobian here.
     Slow,
+    /// The residual did not go down and is within its round-off floor:
+    /// converged as far as the coordinates resolve (module docs).
+    RoundOff,
     /// The residual is NaN or infinite.
     NonFinite,
     /// The budget is spent, or the residual has grown a millionfold over
@@ -250,11 +265,12 @@ pub(crate) enum Rate {
 
 impl Rate {
     /// Whether the contraction is slow; `None` when the iteration failed.
+    /// (`RoundOff` is not asked here: the caller accepts the iterate.)
     #[inline(always)]
     pub(crate) fn slow(self) -> Option<bool> {
         match self {
             Rate::Fast => Some(false),
-            Rate::Slow => Some(true),
+            Rate::Slow | Rate::RoundOff => Some(true),
             Rate::NonFinite | Rate::NotConverged => None,
         }
     }
@@ -283,13 +299,24 @@ impl Residuals {
 
     /// `worst`, the largest relative residual of the iterate after
     /// `updates` updates, is above the tolerance: what to do.
+    /// `at_roundoff` says whether every member's residual is within the
+    /// tolerance or the round-off floor of its coordinates (asked only
+    /// when the residual did not go down).
     #[inline(always)]
-    pub(crate) fn judge(&mut self, worst: f64, updates: usize) -> Rate {
+    pub(crate) fn judge(
+        &mut self,
+        worst: f64,
+        updates: usize,
+        at_roundoff: impl FnOnce() -> bool,
+    ) -> Rate {
         if !worst.is_finite() {
             return Rate::NonFinite;
         }
         if updates == 0 {
             self.first = worst;
+        }
+        if worst >= self.prev && at_roundoff() {
+            return Rate::RoundOff;
         }
         if updates >= self.max_iterations || worst > DIVERGENCE * self.first {
             return Rate::NotConverged;
@@ -366,18 +393,38 @@ mod tests {
     fn residuals_ask_for_a_jacobian_when_the_contraction_slows_and_stop_on_divergence() {
         let mut r = Residuals::new(5);
         // The first iterate is never slow; halving or better is fast.
-        assert_eq!(r.judge(1.0, 0), Rate::Fast);
-        assert_eq!(r.judge(0.5, 1), Rate::Fast);
-        assert_eq!(r.judge(0.3, 2), Rate::Slow);
-        assert_eq!(r.judge(f64::NAN, 3), Rate::NonFinite);
-        assert_eq!(r.judge(f64::INFINITY, 3), Rate::NonFinite);
+        assert_eq!(r.judge(1.0, 0, || false), Rate::Fast);
+        assert_eq!(r.judge(0.5, 1, || false), Rate::Fast);
+        assert_eq!(r.judge(0.3, 2, || false), Rate::Slow);
+        assert_eq!(r.judge(f64::NAN, 3, || false), Rate::NonFinite);
+        assert_eq!(r.judge(f64::INFINITY, 3, || false), Rate::NonFinite);
         // The budget: 5 updates done and still above the tolerance.
-        assert_eq!(r.judge(1e-3, 5), Rate::NotConverged);
+        assert_eq!(r.judge(1e-3, 5, || false), Rate::NotConverged);
         // A millionfold growth over the first residual, within the budget.
         let mut r = Residuals::new(50);
-        assert_eq!(r.judge(2.0, 0), Rate::Fast);
-        assert_eq!(r.judge(1.9e6, 1), Rate::Slow);
-        assert_eq!(r.judge(2.1e6, 2), Rate::NotConverged);
+        assert_eq!(r.judge(2.0, 0, || false), Rate::Fast);
+        assert_eq!(r.judge(1.9e6, 1, || false), Rate::Slow);
+        assert_eq!(r.judge(2.1e6, 2, || false), Rate::NotConverged);
+    }
+
+    #[test]
+    fn residuals_accept_a_stall_only_at_round_off() {
+        let mut r = Residuals::new(50);
+        assert_eq!(r.judge(1e-6, 0, || true), Rate::Fast);
+        // Still going down, however slowly: never stopped by the floor.
+        assert_eq!(r.judge(0.9e-6, 1, || true), Rate::Slow);
+        // Not down, but some member above both tolerance and floor.
+        assert_eq!(r.judge(0.9e-6, 2, || false), Rate::Slow);
+        // Not down and every member at its floor: accepted.
+        assert_eq!(r.judge(1.0e-6, 3, || true), Rate::RoundOff);
+        // A stall at round-off is accepted even with the budget spent.
+        let mut r = Residuals::new(2);
+        assert_eq!(r.judge(1e-12, 0, || true), Rate::Fast);
+        assert_eq!(r.judge(1.1e-12, 2, || true), Rate::RoundOff);
+        // The floor test is not asked while the residual goes down.
+        let mut r = Residuals::new(50);
+        assert_eq!(r.judge(1.0, 0, || unreachable!()), Rate::Fast);
+        assert_eq!(r.judge(0.1, 1, || unreachable!()), Rate::Fast);
     }
 
     #[test]

@@ -319,6 +319,16 @@ pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
     1.0 / (a.sqrt() * b.sqrt())
 }
 
+/// The largest relative residual |g| / (|∇g| · extent) that rounding a
+/// member's coordinates x (each by up to ε|x_i|) can leave: ε ‖x‖ /
+/// extent, times 4 for the rounding of g's own evaluation
+/// ([`Residuals`](crate::newton::Residuals) accepts a stalled iteration
+/// there). From ‖x‖² and extent².
+#[inline]
+pub(crate) fn roundoff_floor(x_norm2: f64, extent2: f64) -> f64 {
+    4.0 * f64::EPSILON * (x_norm2 / extent2).sqrt()
+}
+
 /// Whether a residual r replaces `worst` in a running maximum: r larger,
 /// or r NaN, and never once `worst` is NaN. `if !(r <= worst)` alone keeps
 /// a NaN only until the next member's finite residual replaces it (a bond

@@ -10,6 +10,7 @@ use crate::error::{SolveError, Stage, StepError};
 use crate::newton::{Rate, Residuals};
 use crate::report::StepInfo;
 use crate::solver::SpdSolver;
+use crate::tolerance::roundoff_floor;
 
 /// The coupled path (chains, general graphs): one simplified Newton over
 /// every constraint with the factor of N(q0).
@@ -253,7 +254,24 @@ impl Global {
             // N(q0) is kept whatever the contraction: a fresh factor is a
             // factorisation of the whole system, and the contraction per
             // iteration is O(h²|v|²/l²) from the predictor.
-            let source = match rate.judge(worst, it) {
+            let at_roundoff = || {
+                Self::within_roundoff(
+                    system,
+                    num,
+                    qn,
+                    &self.g,
+                    &self.grad0,
+                    &self.scale0,
+                    args.tol,
+                )
+            };
+            let source = match rate.judge(worst, it, at_roundoff) {
+                Rate::RoundOff => {
+                    report.residual = Some(worst);
+                    report.shake_iterations = it;
+                    report.shake_iterations_total = it as u64;
+                    break;
+                }
                 Rate::Fast | Rate::Slow => None,
                 Rate::NonFinite => Some(SolveError::NonFinite { iterations: it }),
                 Rate::NotConverged => Some(SolveError::NotConverged {
@@ -315,7 +333,7 @@ impl Global {
         // used q0's, which from far off M is the far point's): g(q1) and
         // the scales at q1 are in hand from the gradients above.
         if let Some(tol) = position_tol {
-            self.judge_at_q1(system, num, tol, report.shake_iterations, k, time)?;
+            self.judge_at_q1(system, num, q1, tol, report.shake_iterations, k, time)?;
         }
         // The hidden residual after projection, relative per member: above
         // round-off after an exact solve (or NaN), N is singular to
@@ -355,15 +373,55 @@ impl Global {
             &mut self.grad1,
             &mut self.scale1,
         );
-        self.judge_at_q1(system, num, tol, iterations, k, time)
+        self.judge_at_q1(system, num, q1, tol, iterations, k, time)
+    }
+
+    /// Whether every member's residual |g_k| · scale_k is within `tol` or
+    /// the round-off floor of its coordinates in q,
+    /// ε‖x‖ / extent = ε‖x‖ · |∇g_k| · scale_k (`tolerance::roundoff_floor`),
+    /// with g, the gradients and the scales taken at one point.
+    #[allow(clippy::too_many_arguments)]
+    fn within_roundoff(
+        system: &ParticleSystem,
+        num: &Numbering,
+        q: &[f64],
+        g: &[f64],
+        grad: &[f64],
+        scale: &[f64],
+        tol: f64,
+    ) -> bool {
+        let d = system.dim();
+        system
+            .constraint_families()
+            .iter()
+            .enumerate()
+            .all(|(f, fam)| {
+                let t = fam.table();
+                let (c0, g0, w) = (num.offsets[f], num.grad_offsets[f], t.arity() * d);
+                (0..t.len()).all(|k| {
+                    let n2: f64 = t
+                        .particles(k)
+                        .iter()
+                        .flat_map(|&a| &q[a as usize * d..a as usize * d + d])
+                        .map(|v| v * v)
+                        .sum();
+                    let gk = &grad[g0 + k * w..g0 + (k + 1) * w];
+                    let s = scale[c0 + k];
+                    let e2 = 1.0 / (gk.iter().map(|v| v * v).sum::<f64>() * s * s);
+                    g[c0 + k].abs() * s <= tol.max(roundoff_floor(n2, e2))
+                })
+            })
     }
 
     /// `NotConverged` (stage SHAKE) at the worst member unless every
-    /// |g_k(q1)| · scale1_k ≤ tol; `g` and `scale1` hold q1's.
+    /// |g_k(q1)| · scale1_k is within tol or its round-off floor; `g`,
+    /// `grad1` and `scale1` hold q1's.
+    #[allow(clippy::too_many_arguments)]
     fn judge_at_q1(
         &self,
         system: &ParticleSystem,
         num: &Numbering,
+        q1: &[f64],
         tol: f64,
         iterations: usize,
         k: u64,
@@ -378,7 +436,9 @@ impl Global {
                 worst_c = c;
             }
         }
-        if !(worst_g <= tol) {
+        if !(worst_g <= tol)
+            && !Self::within_roundoff(system, num, q1, &self.g, &self.grad1, &self.scale1, tol)
+        {
             let source = SolveError::NotConverged {
                 iterations,
                 residual: worst_g,

@@ -3,9 +3,9 @@
 //! loop is unrolled and every array lives in registers or L1.
 
 use super::*;
-use crate::newton::Residuals;
+use crate::newton::{Rate, Residuals};
 use crate::particles::stencil::member_scale;
-use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
+use crate::tolerance::{relative_dot_after, roundoff_floor, HIDDEN_LIMIT};
 
 /// Largest ARITY and DIM of a stencil the fixed-size kernel takes.
 pub(super) const FX: usize = 3;
@@ -252,7 +252,20 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
         }
         rescale = false;
         let failed = || unsolved(members[worst_j] as usize, worst, it);
-        let slow = rate.judge(worst, it).slow().ok_or_else(failed)?;
+        let at_roundoff = || {
+            (0..MC).all(|j| {
+                let n2: f64 = at_s[j][..wd].iter().map(|v| v * v).sum();
+                gv[j].abs() * inv_s[j] <= args.tol.max(roundoff_floor(n2, e2_s[j]))
+            })
+        };
+        let judged = rate.judge(worst, it, at_roundoff);
+        if judged == Rate::RoundOff {
+            w.max_rel = w.max_rel.max(worst);
+            w.max_it = w.max_it.max(it);
+            w.iters += it as u64;
+            break;
+        }
+        let slow = judged.slow().ok_or_else(failed)?;
         // A slow contraction with a kept Jacobian: the one at this iterate.
         if !need_jac && slow {
             for j in 0..MC {

@@ -3,9 +3,9 @@
 //! each cluster gathered into a local copy and solved by exact Newton.
 
 use super::*;
-use crate::newton::Residuals;
-use crate::particles::stencil::member_scale;
-use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
+use crate::newton::{Rate, Residuals};
+use crate::particles::stencil::{extent2, member_scale};
+use crate::tolerance::{relative_dot_after, roundoff_floor, HIDDEN_LIMIT};
 
 pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
 
@@ -288,7 +288,23 @@ pub(super) fn shake_one<S: Stencil>(
             break;
         }
         let failed = || unsolved(members[worst_j] as usize, worst, it);
-        let slow = rate.judge(worst, it).slow().ok_or_else(failed)?;
+        let at_roundoff = || {
+            let mut xm = [0.0; ML];
+            (0..mc).all(|j| {
+                gather_member::<S>(&slots[j * ar..(j + 1) * ar], &l.x, &mut xm);
+                let n2: f64 = xm[..wd].iter().map(|v| v * v).sum();
+                let floor = roundoff_floor(n2, extent2::<S>(&xm[..wd]));
+                l.g[j].abs() * inv_s[j] <= args.tol.max(floor)
+            })
+        };
+        let judged = rate.judge(worst, it, at_roundoff);
+        if judged == Rate::RoundOff {
+            *max_rel = max_rel.max(worst);
+            *max_it = (*max_it).max(it);
+            *iters += it as u64;
+            break;
+        }
+        let slow = judged.slow().ok_or_else(failed)?;
         if !need_jac && slow {
             // A slow contraction with a kept Jacobian: the one at this
             // iterate.
