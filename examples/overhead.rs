@@ -3,23 +3,26 @@
 //!
 //!     cargo run --release --example overhead
 //!
-//! For the pendulum and chains of 4, 16 and 64 links, RATTLE over
-//! Störmer–Verlet at h = 0.01 from the same state on M^H:
+//! For the pendulum and chains of 4, 16 and 64 links (256 on request),
+//! RATTLE over Störmer–Verlet at h = 0.01 from the same state on M^H, one
+//! line per system and mode:
 //!
-//! - `run_us`: the library's `run`, every state projected onto M^H and
-//!   shown to the driver (stride 1, nothing stored), per step;
-//! - `observed_us`: the same run with an `on_step` observer that counts
-//!   the steps (what a progress bar's hook costs at least), per step;
-//! - `step_us`: the library's single `step_in_place`, per step;
-//! - `limit_us`: the hand-written RATTLE step;
-//! - `ratio` = run_us / limit_us;
+//!     overhead system=… mode=run|observed|step_in_place run_us=… limit_us=… ratio=… max_rel_g=… …
+//!
+//! - `mode=run`: the library's `run`, every state projected onto M^H and
+//!   shown to the driver (stride 1, nothing stored);
+//! - `mode=observed`: the same run with an `on_step` observer that counts
+//!   the steps (what a progress bar's hook costs at least);
+//! - `mode=step_in_place`: the library's `step_in_place` in a loop;
+//! - `run_us`: the mode's time per step, `limit_us` the hand-written RATTLE
+//!   step's, `ratio` = run_us / limit_us;
 //! - `max_rel_g`: the largest |g|/ℓ² of the library's run states (and
 //!   `limit_rel_g` of the limit's), both evaluated by the limit's own code
 //!   (link vectors first, then their lengths: the generated g expands the
 //!   squares and loses digits like ε|q|², 1e-12 for 64 links), `dE`/`limit_dE` the largest energy
 //!   error of each, `dz` the largest difference between the two
 //!   trajectories after the timed number of steps, `iters`/`limit_iters`
-//!   the Newton iterations of the position stage per step (the limit's
+//!   the Newton updates of the position stage per step (the limit's
 //!   pendulum takes its root in closed form: 0).
 //!
 //! Times are the minimum over 7 repetitions after a warm-up (the machine
@@ -27,11 +30,17 @@
 //! the memory of a stored trajectory of 10⁶ pendulum states: the bytes the
 //! trajectory holds (as requested from the allocator) and the growth of the
 //! resident set, per stored state. Nothing asserts.
+//!
+//! For instruction counts, `OVERHEAD_MODE=run|observed|step_in_place|limit`
+//! with `OVERHEAD_STEPS=n` takes that one mode once, n steps, for the
+//! systems `OVERHEAD_ONLY` selects, and prints nothing: under
+//! `valgrind --tool=callgrind` at two step counts, the difference of the
+//! totals over the difference of the steps is the mode's cost per step.
 
 use geoshake_testkit::bench::limit;
 
 use geoshake::{constrained_system, ConstrainedSystem, Integrator, State, Stop, StormerVerlet};
-use limit::{limit_chain_state, LimitChain, LimitPendulum};
+use limit::{limit_chain_state, pairs, LimitChain, LimitPendulum};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -235,21 +244,21 @@ fn pendulum(steps: u64) -> Row {
 fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Row {
     let (length, gravity) = (1.0, 1.0);
     let (q0, p0) = limit_chain_state(N, length);
-    let z0 = State::from_slices(&q0, &p0);
+    let (q0, p0) = (pairs::<N>(&q0), pairs::<N>(&p0));
+    let z0 = State::from_slices(q0.as_flattened(), p0.as_flattened());
     let mut lim = LimitChain::<N>::new(length, gravity);
     let (run_us, observed_us, step_us, max_rel_g, de, last, iterations) =
-        library(sys, &z0, steps, |z| lim.relative_g(z.q.as_slice()));
-    let (mut q, mut p) = (q0.clone(), p0.clone());
+        library(sys, &z0, steps, |z| {
+            lim.relative_g(&pairs::<N>(z.q.as_slice()))
+        });
     let limit_us = time_us(steps, || {
-        q.copy_from_slice(&q0);
-        p.copy_from_slice(&p0);
+        let (mut q, mut p) = (q0, p0);
         for _ in 0..steps {
             lim.step(H, &mut q, &mut p);
         }
         std::hint::black_box((&q, &p));
     });
-    q.copy_from_slice(&q0);
-    p.copy_from_slice(&p0);
+    let (mut q, mut p) = (q0, p0);
     let e0 = lim.energy(&q, &p);
     let (mut lg, mut lde) = (0.0f64, 0.0f64);
     let mut limit_iterations = 0;
@@ -258,7 +267,7 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
         lg = lg.max(lim.relative_g(&q));
         lde = lde.max((lim.energy(&q, &p) - e0).abs());
     }
-    let dz = State::from_slices(&q, &p).distance(&last);
+    let dz = State::from_slices(q.as_flattened(), p.as_flattened()).distance(&last);
     Row {
         run_us,
         observed_us,
@@ -275,22 +284,94 @@ fn chain<const N: usize, S: ConstrainedSystem + Clone>(sys: S, steps: u64) -> Ro
 }
 
 fn print(name: &str, r: &Row) {
-    println!(
-        "overhead system={name} run_us={:.4} observed_us={:.4} step_us={:.4} limit_us={:.4} ratio={:.2} observed_ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e} iters={:.2} limit_iters={:.2}",
-        r.run_us,
-        r.observed_us,
-        r.step_us,
-        r.limit_us,
-        r.run_us / r.limit_us,
-        r.observed_us / r.limit_us,
-        r.max_rel_g,
-        r.limit_rel_g,
-        r.de,
-        r.limit_de,
-        r.dz,
-        r.iterations,
-        r.limit_iterations
-    );
+    for (mode, us) in [
+        ("run", r.run_us),
+        ("observed", r.observed_us),
+        ("step_in_place", r.step_us),
+    ] {
+        println!(
+            "overhead system={name} mode={mode} run_us={us:.4} limit_us={:.4} ratio={:.2} max_rel_g={:.1e} limit_rel_g={:.1e} dE={:.1e} limit_dE={:.1e} dz={:.1e} iters={:.2} limit_iters={:.2}",
+            r.limit_us,
+            us / r.limit_us,
+            r.max_rel_g,
+            r.limit_rel_g,
+            r.de,
+            r.limit_de,
+            r.dz,
+            r.iterations,
+            r.limit_iterations
+        );
+    }
+}
+
+/// One mode, once, `steps` steps from `z0`, for instruction counts
+/// (`OVERHEAD_MODE`).
+fn probe_library<S: ConstrainedSystem>(sys: S, z0: &State, mode: &str, steps: u64) {
+    let mut integ = Integrator::new(sys, StormerVerlet, H).rattle();
+    match mode {
+        "run" => {
+            let out = integ
+                .run(z0.clone(), Stop::Steps(steps))
+                .store(false)
+                .execute();
+            assert!(out.error.is_none(), "{:?}", out.error);
+        }
+        "observed" => {
+            let mut seen = 0u64;
+            let out = integ
+                .run(z0.clone(), Stop::Steps(steps))
+                .store(false)
+                .on_step(&mut |_: &geoshake::StepEvent| {
+                    seen += 1;
+                    std::ops::ControlFlow::Continue(())
+                })
+                .execute();
+            assert!(out.error.is_none(), "{:?}", out.error);
+            std::hint::black_box(seen);
+        }
+        "step_in_place" => {
+            let mut z = z0.clone();
+            for _ in 0..steps {
+                integ.step_in_place(&mut z).expect("a regular step");
+            }
+            std::hint::black_box(&z);
+        }
+        _ => panic!("OVERHEAD_MODE: run, observed, step_in_place or limit"),
+    }
+}
+
+fn probe_pendulum(mode: &str, steps: u64) {
+    let (th, om) = (1.0f64, 0.5);
+    let q0 = [th.sin(), -th.cos()];
+    let p0 = [om * th.cos(), om * th.sin()];
+    if mode == "limit" {
+        let lim = LimitPendulum {
+            length: 1.0,
+            gravity: 1.0,
+        };
+        let (mut q, mut p) = (q0, p0);
+        for _ in 0..steps {
+            lim.step(H, &mut q, &mut p);
+        }
+        std::hint::black_box((q, p));
+    } else {
+        let z0 = State::from_slices(&q0, &p0);
+        probe_library(geoshake::models::Pendulum::new(1.0, 1.0), &z0, mode, steps);
+    }
+}
+
+fn probe_chain<const N: usize, S: ConstrainedSystem>(sys: S, mode: &str, steps: u64) {
+    let (q0, p0) = limit_chain_state(N, 1.0);
+    if mode == "limit" {
+        let mut lim = LimitChain::<N>::new(1.0, 1.0);
+        let (mut q, mut p) = (pairs::<N>(&q0), pairs::<N>(&p0));
+        for _ in 0..steps {
+            lim.step(H, &mut q, &mut p);
+        }
+        std::hint::black_box((&q, &p));
+    } else {
+        probe_library(sys, &State::from_slices(&q0, &p0), mode, steps);
+    }
 }
 
 /// Resident set size of this process, in bytes.
@@ -333,6 +414,28 @@ fn main() {
     // `OVERHEAD_ONLY=chain_16` measures one system (for profiling).
     let only = std::env::var("OVERHEAD_ONLY").ok();
     let want = |name: &str| only.as_deref().is_none_or(|o| o == name);
+    if let Ok(mode) = std::env::var("OVERHEAD_MODE") {
+        let steps: u64 = std::env::var("OVERHEAD_STEPS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .expect("OVERHEAD_STEPS: the number of steps");
+        if want("pendulum") {
+            probe_pendulum(&mode, steps);
+        }
+        if want("chain_4") {
+            probe_chain::<4, _>(Chain4::new(1.0, 1.0), &mode, steps);
+        }
+        if want("chain_16") {
+            probe_chain::<16, _>(Chain16::new(1.0, 1.0), &mode, steps);
+        }
+        if want("chain_64") {
+            probe_chain::<64, _>(Chain64::new(1.0, 1.0), &mode, steps);
+        }
+        if only.as_deref() == Some("chain_256") {
+            probe_chain::<256, _>(Chain256::new(1.0, 1.0), &mode, steps);
+        }
+        return;
+    }
     if want("pendulum") {
         print("pendulum", &pendulum(20_000));
     }

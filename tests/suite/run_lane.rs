@@ -412,3 +412,82 @@ fn a_run_between_single_steps_changes_nothing_they_read() {
     assert_eq!(info, expected);
     assert_eq!(z, expected_z);
 }
+
+/// From every state of a run that projects every step, without Kahan's
+/// carry, `step_in_place` takes the run's next step: the same state bit
+/// for bit and the same solves. The run loops in the lane, whose steps
+/// the driver's loop takes too (above); `step_in_place` takes the
+/// fixed-size step on the caller's numbers, and a slip in what it hands
+/// that step (h, Π, the step's index) shows here.
+fn single_steps_agree<S: ConstrainedSystem + Clone>(name: &str, sys: &S, z0: &State, h: f64) {
+    let s = Setup {
+        method: "every",
+        stride: 1,
+        store: true,
+        compensated: false,
+    };
+    let (out, seen, events) = run(sys, z0, h, 40, s, false, Watch::Every);
+    assert!(out.error.is_none(), "{name}: {:?}", out.error);
+    let mut integ = Integrator::new(sys.clone(), StormerVerlet, h).rattle();
+    let mut z = State::from_slices(&seen[0].2, &seen[0].3);
+    for k in 1..seen.len() {
+        let info = integ.step_in_place(&mut z).unwrap();
+        assert_eq!(z.q.as_slice(), &seen[k].2[..], "{name}, step {k}");
+        assert_eq!(z.p.as_slice(), &seen[k].3[..], "{name}, step {k}");
+        // The same solves (N's condition is measured against each loop's
+        // own reference, not compared here).
+        let (a, b) = (info, events[k - 1].info);
+        let key =
+            |i: geoshake::StepInfo| (i.shake_iterations, i.rattle_iterations, i.lambda, i.det_n);
+        assert_eq!(key(a), key(b), "{name}, step {k}");
+        // A single step from a state of the run, by a fresh integrator
+        // (which checks its start), is the same step.
+        let mut again = State::from_slices(&seen[k - 1].2, &seen[k - 1].3);
+        Integrator::new(sys.clone(), StormerVerlet, h)
+            .rattle()
+            .step_in_place(&mut again)
+            .unwrap();
+        assert_eq!(again, z, "{name}, step {k}");
+    }
+}
+
+#[test]
+fn single_steps_take_the_runs_steps() {
+    let pendulum = Pendulum::new(1.0, 9.81);
+    single_steps_agree("pendulum", &pendulum, &pendulum_start(), 0.01);
+    let double = Double::new(1.0, 0.7, 9.81);
+    single_steps_agree("double pendulum", &double, &double_start(), 0.01);
+    let chain = geoshake::models::Chain8::new(1.0, 9.81);
+    single_steps_agree("chain of 8", &chain, &chain_start(), 0.01);
+}
+
+/// `step_in_place` validates h and the options once and again only when
+/// they change: a step size made invalid between two steps from the state
+/// the first returned is refused, z left as it was, and the valid one
+/// steps again as a fresh integrator would. A step that fails (h|p| a
+/// hundred rods) leaves z as it was too.
+#[test]
+fn single_steps_see_a_changed_step_size() {
+    let pendulum = Pendulum::new(1.0, 9.81);
+    let mut integ = Integrator::new(pendulum, StormerVerlet, 0.01).rattle();
+    let mut z = integ.project_to_hidden(&pendulum_start()).unwrap();
+    integ.step_in_place(&mut z).unwrap();
+    let z1 = z.clone();
+    for bad in [0.0, f64::NAN, f64::INFINITY] {
+        integ.with_step_size(bad);
+        let e = integ.step_in_place(&mut z).unwrap_err();
+        assert!(matches!(e, StepError::InvalidInput { .. }), "{bad}: {e:?}");
+        assert_eq!(z, z1);
+    }
+    integ.with_step_size(50.0);
+    assert!(integ.step_in_place(&mut z).is_err());
+    assert_eq!(z, z1);
+    integ.with_step_size(0.01);
+    integ.step_in_place(&mut z).unwrap();
+    let mut expected = z1.clone();
+    Integrator::new(pendulum, StormerVerlet, 0.01)
+        .rattle()
+        .step_in_place(&mut expected)
+        .unwrap();
+    assert_eq!(z, expected);
+}

@@ -74,6 +74,10 @@ pub struct Integrator<S: ConstrainedSystem, B: BaseMap> {
     pub(crate) checked_valid: bool,
     pub(crate) checked_norm: f64,
     pub(crate) checked_det: f64,
+    /// The step size `check_h` accepted with the current options (NaN:
+    /// none), so that a step from a checked state validates them only when
+    /// they changed.
+    pub(crate) valid_h: f64,
 }
 
 impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
@@ -105,6 +109,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             checked_valid: false,
             checked_norm: f64::NAN,
             checked_det: f64::NAN,
+            valid_h: f64::NAN,
         }
     }
 
@@ -284,6 +289,7 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
     /// ```
     pub fn with_options(mut self, options: Options) -> Self {
         self.guard.options = options;
+        self.valid_h = f64::NAN;
         self
     }
 
@@ -469,13 +475,39 @@ impl<S: ConstrainedSystem, B: BaseMap> Integrator<S, B> {
             // N's condition relative to the step before, which bounds the
             // condition begin() would compute): take its N as this step's
             // reference instead of evaluating and factorising it again.
-            self.check_h()?;
+            // h and the options, validated once for as long as they stay.
+            if self.valid_h != self.h {
+                self.check_h()?;
+                self.valid_h = self.h;
+            }
             self.guard.resume(self.checked_norm, self.checked_det);
         } else {
             self.checked_valid = false;
             self.begin(z.q.as_slice(), z.p.as_slice(), 0, 0.0)?;
         }
         self.carrying = false;
+        // One substep a step: the fixed-size classical step straight on
+        // z's numbers, the same substep `advance` reaches through the
+        // step's layers (`tests/suite/run_lane.rs` compares the two).
+        if self.steps.composition.stages() == 1 {
+            let map = &mut self.steps.map;
+            let fast = crate::run::lane::single(
+                map,
+                &self.system,
+                &mut self.guard,
+                z,
+                &mut self.checked,
+                self.h,
+                project,
+            );
+            if let Some(res) = fast {
+                self.checked_valid = res.is_ok();
+                if res.is_ok() {
+                    (self.checked_norm, self.checked_det) = self.guard.last();
+                }
+                return res;
+            }
+        }
         self.out_q.copy_from_slice(z.q.as_slice());
         self.out_p.copy_from_slice(z.p.as_slice());
         let mut q = std::mem::take(&mut self.out_q);

@@ -133,6 +133,86 @@ pub(crate) fn enter<'a, S: ConstrainedSystem, B: BaseMap>(
     Some(result)
 }
 
+/// One step from `z`, the substep [`StepMap::apply`] would take (projected
+/// if `project`), taken by the fixed-size classical step on local arrays
+/// when the system has one and the fast paths are on: `step_in_place`'s
+/// fast path, without the layers between the integrator and that step and
+/// without copies of the state through the integrator's buffers. On
+/// success the new state is written into `z` and into `checked` (q then
+/// p); on an error `z` is left as it was. Step 1 at t = h, no carry, as
+/// `step_in_place` takes any step. `None`: not taken, nothing done.
+pub(crate) fn single<S: ConstrainedSystem, B: BaseMap>(
+    map: &mut StepMap<B>,
+    sys: &S,
+    guard: &mut Guard,
+    z: &mut State,
+    checked: &mut [f64],
+    h: f64,
+    project: bool,
+) -> Option<Result<StepInfo, StepError>> {
+    let kdk = map.classical?;
+    if !(map.fast_paths && map.fixed_size) {
+        return None;
+    }
+    (map.n_fresh, map.show, map.shown_fresh) = (false, false, false);
+    let newton = *guard.newton();
+    let (q, p) = (z.q.as_mut_slice(), z.p.as_mut_slice());
+    let cx = Substep {
+        q,
+        p,
+        h,
+        kdk,
+        project,
+        step: 1,
+        t: h,
+        newton,
+        guard,
+        ws: &mut map.ws,
+        carry: None,
+        show: None,
+    };
+    let result = sys.with_sizes(SingleVisitor { cx, checked })?;
+    // As `apply` leaves it after the substep.
+    map.n_fresh = result.is_ok();
+    Some(result)
+}
+
+/// [`single`] as a size visitor: the state copied into arrays of the
+/// system's sizes, one [`fixed_step`] on them, and the result copied back.
+struct SingleVisitor<'a> {
+    cx: Substep<'a>,
+    checked: &'a mut [f64],
+}
+
+impl<S: ConstrainedSystem> SizeVisitor<S> for SingleVisitor<'_> {
+    type Output = Option<Result<StepInfo, StepError>>;
+    #[inline]
+    fn fixed<const D: usize, const M: usize>(self, sys: &S) -> Self::Output {
+        let SingleVisitor { mut cx, checked } = self;
+        if !fits::<S, D, M>(sys, &cx) || checked.len() != 2 * D {
+            return None;
+        }
+        let (Ok(mut q), Ok(mut p)) = (<[f64; D]>::try_from(&*cx.q), <[f64; D]>::try_from(&*cx.p))
+        else {
+            return None;
+        };
+        let (step, t) = (cx.step, cx.t);
+        let info = fixed_step::<S, D, M>(sys, &mut cx, (&mut q, &mut p), step, t, None);
+        if info.is_ok() {
+            cx.q.copy_from_slice(&q);
+            cx.p.copy_from_slice(&p);
+            let (cq, cp) = checked.split_at_mut(D);
+            cq.copy_from_slice(&q);
+            cp.copy_from_slice(&p);
+        }
+        Some(info)
+    }
+    #[inline]
+    fn dynamic(self, _: &S) -> Self::Output {
+        None
+    }
+}
+
 /// The lane as a size visitor ([`ConstrainedSystem::with_sizes`]): a
 /// system with fixed sizes that [`fits`] gets [`run`] for them; `None`
 /// (nothing done) otherwise.

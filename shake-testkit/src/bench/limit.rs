@@ -6,9 +6,10 @@
 //! Nothing here comes from the library (no trait, no model, no linear
 //! algebra): the systems are written out again below, the multiplier of the
 //! pendulum is the root of a quadratic, the chain's position stage is
-//! Newton's method on the link lengths with its tridiagonal matrix solved
-//! by the Thomas algorithm, and the velocity projection (linear in σ) is
-//! one tridiagonal solve.
+//! simplified Newton on the link lengths with its tridiagonal matrix
+//! factorised once per step (Thomas, reciprocal pivots), and the velocity
+//! projection (linear in σ) is one tridiagonal solve. Sizes are const
+//! generics, the state fixed-size arrays of particles.
 //!
 //! The method (classical RATTLE, unit masses, H = |p|²/2 + γ Σ y_k):
 //!
@@ -16,9 +17,10 @@
 //! 2. p½ = p* − G(q)ᵀμ,  p1 = p½ − (h/2) ∇V(q1);
 //! 3. p1 ← p1 − G(q1)ᵀσ  with G(q1) p1 = 0,
 //!
-//! G = g_q. Newton on μ stops by the same rule as the library's iterations
-//! (an update below 4ε of the unknown, or an update that no longer halves
-//! once below 1e-6): the same steps to round-off.
+//! G = g_q. Newton on μ stops by the library's classical rule (a residual
+//! at g's round-off level and one confirming update, an update below 4ε of
+//! the unknown, or an update that no longer halves once below 1e-6): the
+//! same steps to round-off.
 #![allow(dead_code, clippy::needless_range_loop)]
 
 /// The planar pendulum, H = |p|²/2 + γ q₂, g = |q|² − ℓ².
@@ -65,29 +67,40 @@ impl LimitPendulum {
 }
 
 /// A hanging chain of N unit masses joined by rods of length ℓ, the first
-/// anchored at the origin: q = (x₀, y₀, x₁, y₁, …),
+/// anchored at the origin: particle k at q[k] = (x_k, y_k),
 /// g₀ = |q₀|² − ℓ², g_k = |q_k − q_{k−1}|² − ℓ².
+///
+/// The position stage is simplified (chord) Newton on the multipliers: the
+/// tridiagonal Jacobian at ν = 0 is factorised once per step, with the
+/// reciprocals of its pivots kept, and every update is one forward and one
+/// backward sweep of multiplications. It stops as the library's classical
+/// SHAKE does: once every |g_k(q1)| is below its round-off level
+/// ε Σ_j |∂g_k/∂q_j| |q_j| (at q0), after one more (confirming) update,
+/// or on an update below 4ε‖ν‖, or on stagnation below 1e-6.
 #[derive(Clone, Debug)]
 pub struct LimitChain<const N: usize> {
     pub length: f64,
     pub gravity: f64,
     // Scratch, kept between steps (no allocation per step).
     d0: [[f64; 2]; N],
-    d1: [[f64; 2]; N],
+    a: [[f64; 2]; N],
     nu: [f64; N],
     r: [f64; N],
-    lo: [f64; N],
-    di: [f64; N],
+    floor: [f64; N],
+    // The factors of the Jacobian: multipliers of the forward sweep, the
+    // reciprocal pivots and the upper diagonal.
+    w: [f64; N],
+    inv: [f64; N],
     up: [f64; N],
 }
 
-/// The link vector k of the positions (or velocities) x.
+/// The link vector k of the particles x.
 #[inline(always)]
-fn link(x: &[f64], k: usize) -> [f64; 2] {
+fn link<const N: usize>(x: &[[f64; 2]; N], k: usize) -> [f64; 2] {
     if k == 0 {
-        [x[0], x[1]]
+        x[0]
     } else {
-        [x[2 * k] - x[2 * k - 2], x[2 * k + 1] - x[2 * k - 1]]
+        [x[k][0] - x[k - 1][0], x[k][1] - x[k - 1][1]]
     }
 }
 
@@ -96,19 +109,33 @@ fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[0] + a[1] * b[1]
 }
 
-/// Solves the tridiagonal system (lo, di, up) x = r in place (Thomas, no
-/// pivoting: the chain's matrices are diagonally dominant); di and r are
-/// overwritten, r holds x.
+/// Factorises the tridiagonal matrix (lo, di, up) without pivoting (the
+/// chain's matrices are diagonally dominant): the forward sweep's
+/// multipliers into `w`, the reciprocal pivots into `inv`.
 #[inline(always)]
-fn thomas<const N: usize>(lo: &[f64; N], di: &mut [f64; N], up: &[f64; N], r: &mut [f64; N]) {
+fn factor<const N: usize>(
+    lo: &[f64; N],
+    di: &[f64; N],
+    up: &[f64; N],
+    w: &mut [f64; N],
+    inv: &mut [f64; N],
+) {
+    inv[0] = 1.0 / di[0];
     for k in 1..N {
-        let w = lo[k] / di[k - 1];
-        di[k] -= w * up[k - 1];
-        r[k] -= w * r[k - 1];
+        w[k] = lo[k] * inv[k - 1];
+        inv[k] = 1.0 / (di[k] - w[k] * up[k - 1]);
     }
-    r[N - 1] /= di[N - 1];
+}
+
+/// Solves with the factors of [`factor`], r in place.
+#[inline(always)]
+fn solve<const N: usize>(w: &[f64; N], inv: &[f64; N], up: &[f64; N], r: &mut [f64; N]) {
+    for k in 1..N {
+        r[k] -= w[k] * r[k - 1];
+    }
+    r[N - 1] *= inv[N - 1];
     for k in (0..N - 1).rev() {
-        r[k] = (r[k] - up[k] * r[k + 1]) / di[k];
+        r[k] = (r[k] - up[k] * r[k + 1]) * inv[k];
     }
 }
 
@@ -118,66 +145,104 @@ impl<const N: usize> LimitChain<N> {
             length,
             gravity,
             d0: [[0.0; 2]; N],
-            d1: [[0.0; 2]; N],
+            a: [[0.0; 2]; N],
             nu: [0.0; N],
             r: [0.0; N],
-            lo: [0.0; N],
-            di: [0.0; N],
+            floor: [0.0; N],
+            w: [0.0; N],
+            inv: [0.0; N],
             up: [0.0; N],
         }
     }
 
-    /// One RATTLE step in place (q and p of length 2N). Returns the Newton
-    /// iterations of the position stage.
-    pub fn step(&mut self, h: f64, q: &mut [f64], p: &mut [f64]) -> usize {
+    /// Link k of q1(ν): A_k − c_k ν_k d_k + ν_{k+1} d_{k+1} + ν_{k−1} d_{k−1}
+    /// (c_0 = 1, c_k = 2), with A = link of q + h p* and d = link of q0.
+    #[inline(always)]
+    fn moved(&self, k: usize) -> [f64; 2] {
+        let (d, nu) = (&self.d0, &self.nu);
+        let c = if k == 0 { nu[0] } else { 2.0 * nu[k] };
+        let mut x = [self.a[k][0] - c * d[k][0], self.a[k][1] - c * d[k][1]];
+        if k + 1 < N {
+            x[0] += nu[k + 1] * d[k + 1][0];
+            x[1] += nu[k + 1] * d[k + 1][1];
+        }
+        if k > 0 {
+            x[0] += nu[k - 1] * d[k - 1][0];
+            x[1] += nu[k - 1] * d[k - 1][1];
+        }
+        x
+    }
+
+    /// One RATTLE step in place. Returns the Newton updates of the position
+    /// stage.
+    pub fn step(&mut self, h: f64, q: &mut [[f64; 2]; N], p: &mut [[f64; 2]; N]) -> usize {
         let hh = 0.5 * h;
         let l2 = self.length * self.length;
-        // p* = p − (h/2)∇V, a = q + h p* (kept in p and q for now).
+        let eps2 = 2.0 * f64::EPSILON;
+        // p* = p − (h/2)∇V; the links d of q0 and A of q + h p*, the
+        // round-off level of g at q0, and the Jacobian at ν = 0:
+        // ∂r_k/∂ν_j = 2 A_k · ∂A_k/∂ν_j.
+        let (mut lo, mut di) = ([0.0; N], [0.0; N]);
+        let mut prev_q = [0.0; 2];
+        let mut prev_a = [0.0; 2];
         for k in 0..N {
-            self.d0[k] = link(q, k);
-        }
-        for k in 0..N {
-            p[2 * k + 1] -= hh * self.gravity;
-            q[2 * k] += h * p[2 * k];
-            q[2 * k + 1] += h * p[2 * k + 1];
+            p[k][1] -= hh * self.gravity;
+            let a = [q[k][0] + h * p[k][0], q[k][1] + h * p[k][1]];
+            let d = [q[k][0] - prev_q[0], q[k][1] - prev_q[1]];
+            self.d0[k] = d;
+            self.a[k] = [a[0] - prev_a[0], a[1] - prev_a[1]];
+            self.floor[k] = eps2
+                * (d[0].abs() * (q[k][0].abs() + prev_q[0].abs())
+                    + d[1].abs() * (q[k][1].abs() + prev_q[1].abs()));
             self.nu[k] = 0.0;
+            prev_q = q[k];
+            prev_a = a;
         }
-        // Unknowns ν_k = 2hμ_k: particle j moves by −(ν_j d_j − ν_{j+1} d_{j+1}),
-        // link k of q1 is D_k = A_k − c_k ν_k d_k + ν_{k+1} d_{k+1} + ν_{k−1} d_{k−1}
-        // (c_0 = 1, c_k = 2). Newton: r_k = |D_k|² − ℓ².
+        for k in 0..N {
+            let ak = self.a[k];
+            di[k] = if k == 0 {
+                -2.0 * dot(ak, self.d0[0])
+            } else {
+                -4.0 * dot(ak, self.d0[k])
+            };
+            if k + 1 < N {
+                self.up[k] = 2.0 * dot(ak, self.d0[k + 1]);
+            }
+            if k > 0 {
+                lo[k] = 2.0 * dot(ak, self.d0[k - 1]);
+            }
+        }
+        factor(&lo, &di, &self.up, &mut self.w, &mut self.inv);
         let mut iterations = 0;
         let mut prev = f64::INFINITY;
         loop {
+            let mut at_floor = true;
+            // After the first update, the Jacobian at ν1 (off the exact one
+            // by O(‖ν − ν1‖), quadratically small): the contraction of the
+            // updates that follow is then as fast as the library's.
+            let refresh = iterations == 1;
             for k in 0..N {
-                let a = link(q, k);
-                let mut dx = a;
-                let c = if k == 0 { 1.0 } else { 2.0 };
-                dx[0] -= c * self.nu[k] * self.d0[k][0];
-                dx[1] -= c * self.nu[k] * self.d0[k][1];
-                if k + 1 < N {
-                    dx[0] += self.nu[k + 1] * self.d0[k + 1][0];
-                    dx[1] += self.nu[k + 1] * self.d0[k + 1][1];
+                let x = self.moved(k);
+                let r = dot(x, x) - l2;
+                at_floor &= r.abs() <= self.floor[k];
+                self.r[k] = r;
+                if refresh {
+                    di[k] = if k == 0 { -2.0 } else { -4.0 } * dot(x, self.d0[k]);
+                    if k + 1 < N {
+                        self.up[k] = 2.0 * dot(x, self.d0[k + 1]);
+                    }
+                    if k > 0 {
+                        lo[k] = 2.0 * dot(x, self.d0[k - 1]);
+                    }
                 }
-                if k > 0 {
-                    dx[0] += self.nu[k - 1] * self.d0[k - 1][0];
-                    dx[1] += self.nu[k - 1] * self.d0[k - 1][1];
-                }
-                self.d1[k] = dx;
-                self.r[k] = dot(dx, dx) - l2;
-                // ∂r_k/∂ν_j = 2 D_k · ∂D_k/∂ν_j.
-                self.di[k] = -2.0 * c * dot(dx, self.d0[k]);
-                self.up[k] = if k + 1 < N {
-                    2.0 * dot(dx, self.d0[k + 1])
-                } else {
-                    0.0
-                };
-                self.lo[k] = if k > 0 {
-                    2.0 * dot(dx, self.d0[k - 1])
-                } else {
-                    0.0
-                };
             }
-            thomas(&self.lo, &mut self.di, &self.up, &mut self.r);
+            if at_floor && iterations == 0 {
+                break;
+            }
+            if refresh && !at_floor {
+                factor(&lo, &di, &self.up, &mut self.w, &mut self.inv);
+            }
+            solve(&self.w, &self.inv, &self.up, &mut self.r);
             let (mut step, mut size) = (0.0f64, 0.0f64);
             for k in 0..N {
                 self.nu[k] -= self.r[k];
@@ -185,7 +250,9 @@ impl<const N: usize> LimitChain<N> {
                 size = size.max(self.nu[k].abs());
             }
             iterations += 1;
-            if step <= 4.0 * f64::EPSILON * size
+            // At round-off the update just taken was the confirming one.
+            if at_floor
+                || step <= 4.0 * f64::EPSILON * size
                 || (step > 0.5 * prev && step <= 1e-6 * size.max(1.0))
                 || iterations >= 50
             {
@@ -193,7 +260,7 @@ impl<const N: usize> LimitChain<N> {
             }
             prev = step;
         }
-        // Move the particles by −(ν_j d_j − ν_{j+1} d_{j+1}); p½ = that / h.
+        // Particle j moves by −f_j, f_j = ν_j d_j − ν_{j+1} d_{j+1}; p½ = that / h.
         let inv_h = 1.0 / h;
         for j in 0..N {
             let mut f = [self.nu[j] * self.d0[j][0], self.nu[j] * self.d0[j][1]];
@@ -201,51 +268,50 @@ impl<const N: usize> LimitChain<N> {
                 f[0] -= self.nu[j + 1] * self.d0[j + 1][0];
                 f[1] -= self.nu[j + 1] * self.d0[j + 1][1];
             }
-            q[2 * j] -= f[0];
-            q[2 * j + 1] -= f[1];
-            p[2 * j] -= f[0] * inv_h;
-            p[2 * j + 1] -= f[1] * inv_h + hh * self.gravity;
+            q[j][0] += h * p[j][0] - f[0];
+            q[j][1] += h * p[j][1] - f[1];
+            p[j][0] -= f[0] * inv_h;
+            p[j][1] -= f[1] * inv_h + hh * self.gravity;
         }
         // Velocity projection: D_k · link_k(p − G(q1)ᵀσ) = 0, with τ = 2σ:
         // link_k(Gᵀσ) = c_k τ_k D_k − τ_{k+1} D_{k+1} − τ_{k−1} D_{k−1}.
+        let mut prev_d = [0.0; 2];
         for k in 0..N {
             let dk = link(q, k);
-            self.d1[k] = dk;
+            self.d0[k] = dk;
             let c = if k == 0 { 1.0 } else { 2.0 };
             self.r[k] = dot(dk, link(p, k));
-            self.di[k] = c * dot(dk, dk);
-            self.lo[k] = if k > 0 { -dot(dk, self.d1[k - 1]) } else { 0.0 };
-            self.up[k] = 0.0;
+            di[k] = c * dot(dk, dk);
+            lo[k] = -dot(dk, prev_d);
+            if k > 0 {
+                self.up[k - 1] = lo[k];
+            }
+            prev_d = dk;
         }
-        for k in 0..N - 1 {
-            self.up[k] = self.lo[k + 1];
-        }
-        thomas(&self.lo, &mut self.di, &self.up, &mut self.r);
+        factor(&lo, &di, &self.up, &mut self.w, &mut self.inv);
+        solve(&self.w, &self.inv, &self.up, &mut self.r);
         // Particle j gets −(τ_j D_j − τ_{j+1} D_{j+1}).
         for j in 0..N {
-            let mut f = [self.r[j] * self.d1[j][0], self.r[j] * self.d1[j][1]];
+            let mut f = [self.r[j] * self.d0[j][0], self.r[j] * self.d0[j][1]];
             if j + 1 < N {
-                f[0] -= self.r[j + 1] * self.d1[j + 1][0];
-                f[1] -= self.r[j + 1] * self.d1[j + 1][1];
+                f[0] -= self.r[j + 1] * self.d0[j + 1][0];
+                f[1] -= self.r[j + 1] * self.d0[j + 1][1];
             }
-            p[2 * j] -= f[0];
-            p[2 * j + 1] -= f[1];
+            p[j][0] -= f[0];
+            p[j][1] -= f[1];
         }
         iterations
     }
 
     /// H(q, p).
-    pub fn energy(&self, q: &[f64], p: &[f64]) -> f64 {
+    pub fn energy(&self, q: &[[f64; 2]; N], p: &[[f64; 2]; N]) -> f64 {
         (0..N)
-            .map(|k| {
-                0.5 * (p[2 * k] * p[2 * k] + p[2 * k + 1] * p[2 * k + 1])
-                    + self.gravity * q[2 * k + 1]
-            })
+            .map(|k| 0.5 * dot(p[k], p[k]) + self.gravity * q[k][1])
             .sum()
     }
 
     /// max_k |g_k(q)| / ℓ².
-    pub fn relative_g(&self, q: &[f64]) -> f64 {
+    pub fn relative_g(&self, q: &[[f64; 2]; N]) -> f64 {
         let l2 = self.length * self.length;
         (0..N)
             .map(|k| {
@@ -254,6 +320,15 @@ impl<const N: usize> LimitChain<N> {
             })
             .fold(0.0, f64::max)
     }
+}
+
+/// The coordinates x = (x₀, y₀, x₁, y₁, …) of N particles as pairs.
+pub fn pairs<const N: usize>(x: &[f64]) -> [[f64; 2]; N] {
+    let mut out = [[0.0; 2]; N];
+    for (o, c) in out.iter_mut().zip(x.chunks_exact(2)) {
+        *o = [c[0], c[1]];
+    }
+    out
 }
 
 /// A point of M^H for a chain of `n` links of length ℓ (the benches'
