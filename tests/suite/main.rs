@@ -51,6 +51,7 @@ mod particles_result_scale;
 mod particles_review;
 mod particles_rings;
 mod particles_roundoff;
+mod particles_settle;
 mod particles_threads;
 mod particles_virial;
 mod perf_alloc;

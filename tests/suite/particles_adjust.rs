@@ -23,17 +23,19 @@ fn tether(q: &[f64], f: &mut [f64]) -> f64 {
     v
 }
 
-/// The solvers: rigid water on the fixed-size and the general cluster
-/// kernels, a chain on the band and the sparse coupled solvers.
+/// The solvers: rigid water in closed form and on the fixed-size and the
+/// general Newton cluster kernels, a chain on the band and the sparse coupled solvers.
 #[derive(Copy, Clone, Debug)]
 enum Case {
+    WaterSettle,
     WaterFixed,
     WaterGeneral,
     ChainBand,
     ChainSparse,
 }
 
-const CASES: [Case; 4] = [
+const CASES: [Case; 5] = [
+    Case::WaterSettle,
     Case::WaterFixed,
     Case::WaterGeneral,
     Case::ChainBand,
@@ -44,7 +46,9 @@ const CASES: [Case; 4] = [
 /// at 300 K, not tied to any solver (stamp cleared), and a solver for it.
 fn setup(case: Case, method: Method, forces: bool, tol: f64) -> (Rattle, ParticleState) {
     let (system, state) = match case {
-        Case::WaterFixed | Case::WaterGeneral => generate::water(12, 7).unwrap(),
+        Case::WaterSettle | Case::WaterFixed | Case::WaterGeneral => {
+            generate::water(12, 7).unwrap()
+        }
         Case::ChainBand | Case::ChainSparse => generate::chain(40, 7).unwrap(),
     };
     let solver = match case {
@@ -64,8 +68,10 @@ fn setup(case: Case, method: Method, forces: bool, tol: f64) -> (Rattle, Particl
         ..Options::default()
     };
     let mut rattle = Rattle::new(system, 2.0, options).unwrap();
-    if let Case::WaterGeneral = case {
-        rattle.use_general_cluster_kernel();
+    match case {
+        Case::WaterGeneral => rattle.use_general_cluster_kernel(),
+        Case::WaterFixed => rattle.use_newton_cluster_kernel(),
+        _ => {}
     }
     let mut state = state;
     rattle.project(&mut state).unwrap();
@@ -156,10 +162,17 @@ fn at(v: &[f64], a: usize) -> [f64; 3] {
 /// its length, and Σ_a m_a (x_a − x̃_a) and Σ_a q0_a × m_a (x_a − x̃_a)
 /// vanish per molecule; after `project_momenta` every bond's relative
 /// velocity is across it, and the change of p has no net force or torque
-/// about q's origin.
+/// about q's origin. Both ways of solving a rigid water: in closed form
+/// and by Newton.
 #[test]
 fn the_results_are_the_projections_they_must_be() {
-    let (mut rattle, state) = setup(Case::WaterFixed, Method::Rattle, false, 1e-13);
+    for case in [Case::WaterSettle, Case::WaterFixed] {
+        the_results_are_the_projections_on(case);
+    }
+}
+
+fn the_results_are_the_projections_on(case: Case) {
+    let (mut rattle, state) = setup(case, Method::Rattle, false, 1e-13);
     let q0 = state.q().to_vec();
     let m = rattle.system().masses().to_vec();
     let lengths: Vec<f64> = rattle.system().constraint_families()[0]
@@ -170,7 +183,11 @@ fn the_results_are_the_projections_they_must_be() {
     let kicked: Vec<f64> = q0.iter().map(|q| q + 0.05 * rng.next()).collect();
     let mut x = kicked.clone();
     let info = rattle.shake_positions(&q0, &mut x).unwrap();
-    assert!(info.shake_iterations >= 2, "{info:?}");
+    // Newton iterates; the closed form does not.
+    match case {
+        Case::WaterSettle => assert_eq!(info.shake_iterations, 0, "{info:?}"),
+        _ => assert!(info.shake_iterations >= 2, "{info:?}"),
+    }
     let scale = q0.iter().fold(0.0f64, |s, q| s.max(q.abs()));
     for mol in 0..q0.len() / 9 {
         let atoms = [3 * mol, 3 * mol + 1, 3 * mol + 2];

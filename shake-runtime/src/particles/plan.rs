@@ -32,6 +32,13 @@ pub struct FamilyClusters {
     /// and it has a fixed-size kernel (`cluster::shake_fixed`); set by
     /// [`FamilyClusters::detect_shape`].
     pub(crate) fixed: Option<(u8, u8)>,
+    /// Every cluster is a rigid triangle of distance constraints in R³
+    /// (shape (3, 3), the three pairs of its three particles, a stencil
+    /// that declares [`Stencil::DISTANCE`](super::Stencil::DISTANCE)):
+    /// solved in closed form (`cluster::settle`). Set by
+    /// [`ClusterKernel::choose_kernel`](super::ClusterKernel::choose_kernel)
+    /// after [`FamilyClusters::detect_shape`].
+    pub(crate) settle: bool,
     /// Runs of consecutive clusters whose particles and members lie in
     /// disjoint, increasing index ranges, so that the runs can be solved on
     /// separate threads, each writing its own slices of q, p and ν; set by
@@ -65,6 +72,7 @@ impl FamilyClusters {
     /// particles). The stencil's ARITY and DIM are checked at dispatch.
     pub(crate) fn detect_shape(&mut self) {
         self.fixed = None;
+        self.settle = false;
         let n = self.len();
         if n == 0 {
             return;

@@ -141,6 +141,7 @@ impl Rattle {
             let families = system.constraint_families().iter();
             for (plan, f) in plans.iter_mut().zip(families) {
                 plan.detect_shape();
+                f.choose_kernel(plan);
                 let (n, members) = (system.particles(), f.table().len());
                 plan.detect_blocks(n, members, super::plan::BLOCK_CLUSTERS);
             }
@@ -228,7 +229,40 @@ impl Rattle {
     /// ```
     pub fn use_general_cluster_kernel(&mut self) {
         if let Path::Clusters { plans, .. } = &mut self.path {
-            plans.iter_mut().for_each(|p| p.fixed = None);
+            plans
+                .iter_mut()
+                .for_each(|p| (p.fixed, p.settle) = (None, false));
+        }
+    }
+
+    /// Makes the cluster path solve rigid triangles of distance
+    /// constraints (rigid water) by Newton, with the fixed-size kernel,
+    /// instead of in closed form (SETTLE). Both solve the same SHAKE and
+    /// RATTLE equations and give the same steps to round-off; this exists
+    /// to compare them (tests, benchmarks). No effect elsewhere.
+    ///
+    /// ```
+    /// use geoshake_runtime::particles::{generate, Options, Rattle};
+    /// let (system, _) = generate::water(2, 1).unwrap();
+    /// let mut rattle = Rattle::new(system, 1e-3, Options::default()).unwrap();
+    /// assert!(rattle.closed_form_clusters());
+    /// rattle.use_newton_cluster_kernel();
+    /// assert!(!rattle.closed_form_clusters());
+    /// ```
+    pub fn use_newton_cluster_kernel(&mut self) {
+        if let Path::Clusters { plans, .. } = &mut self.path {
+            plans.iter_mut().for_each(|p| p.settle = false);
+        }
+    }
+
+    /// True when some family's clusters are solved in closed form (rigid
+    /// triangles of distance constraints in R³, [`Stencil::DISTANCE`]).
+    ///
+    /// [`Stencil::DISTANCE`]: super::Stencil::DISTANCE
+    pub fn closed_form_clusters(&self) -> bool {
+        match &self.path {
+            Path::Clusters { plans, .. } => plans.iter().any(|p| p.settle),
+            Path::Global(_) => false,
         }
     }
 

@@ -48,6 +48,13 @@ pub trait Stencil: Send + Sync {
     const DIM: usize;
     /// Numbers per row of the table.
     const DATA: usize;
+    /// True when f is the distance constraint f(x; c) = |x_0 − x_1|² −
+    /// c_0² (ARITY 2, DATA ≥ 1), exactly: a declaration, not checked. A
+    /// family of such members whose clusters are triangles (three
+    /// particles, their three pairs) in R³, rigid water for one, then has
+    /// its SHAKE and RATTLE steps solved in closed form (SETTLE) instead
+    /// of by Newton. False by default.
+    const DISTANCE: bool = false;
 
     /// f(x; c).
     fn value(&self, x: &[f64], c: &[f64]) -> f64;

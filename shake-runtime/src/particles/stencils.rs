@@ -23,6 +23,7 @@ impl<const D: usize> Stencil for Distance<D> {
     const ARITY: usize = 2;
     const DIM: usize = D;
     const DATA: usize = 1;
+    const DISTANCE: bool = true;
     #[inline(always)]
     fn value(&self, x: &[f64], c: &[f64]) -> f64 {
         let mut s = 0.0;

@@ -122,6 +122,11 @@ pub trait ClusterKernel {
         p: &mut [f64],
         report: &mut ClusterReport,
     ) -> Result<(), ClusterFailure>;
+    /// Chooses the kernel of this family's clusters at plan time, after
+    /// the plan's shape is known: the closed form for rigid triangles of
+    /// distance constraints, else Newton.
+    #[doc(hidden)]
+    fn choose_kernel(&self, _plan: &mut FamilyClusters) {}
 }
 
 /// A potential family: V_fam(x) = Σ_k f(x_{i_k1}, …; c_k).

@@ -73,10 +73,12 @@ fn unsolved(member: usize, residual: f64, iterations: usize) -> ClusterFailure {
 pub(crate) mod dense;
 mod fixed;
 mod general;
+mod settle;
 
 use dense::*;
 use fixed::*;
 use general::*;
+pub(crate) use settle::all_triangles;
 
 /// The position stage on every cluster of one family: on entry `q` holds
 /// q̃ = q0 + h M⁻¹ p̃ and `p` holds p̃ on the cluster's particles; on exit q1
@@ -240,7 +242,20 @@ fn shake_block<S: Stencil>(
             ))
         };
     }
+    // A family of rigid triangles of distances in R³: closed form.
+    let settle = plan.settle && S::DIM == 3 && S::ARITY == 2;
     let done = match (fixed, S::DIM) {
+        _ if settle => Some(settle::shake_triangles::<S>(
+            &mut w,
+            st,
+            tb,
+            pl,
+            a,
+            fuse,
+            cs.clone(),
+            q,
+            p,
+        )),
         (Some((3, 3)), 3) => fixed!(3, 3, 9),
         (Some((2, 3)), 3) => fixed!(2, 3, 9),
         (Some((1, 2)), 3) => fixed!(1, 2, 6),
@@ -331,6 +346,9 @@ fn project_block<S: Stencil>(
     block: Block,
     p: &mut [f64],
 ) -> Result<f64, ClusterFailure> {
+    if plan.settle && S::DIM == 3 && S::ARITY == 2 {
+        return settle::project_triangles(plan, inv_mass, q, block, p);
+    }
     let (d, ar) = (S::DIM, S::ARITY);
     let wd = ar * d;
     let base = block.particles.0;
@@ -405,5 +423,8 @@ impl<S: Stencil> ClusterKernel for Family<S> {
         report: &mut ClusterReport,
     ) -> Result<(), ClusterFailure> {
         project_clusters(&self.stencil, &self.table, plan, inv_mass, q, p, report)
+    }
+    fn choose_kernel(&self, plan: &mut FamilyClusters) {
+        plan.settle = S::DISTANCE && S::DIM == 3 && all_triangles(plan, S::ARITY);
     }
 }
