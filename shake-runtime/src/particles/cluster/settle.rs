@@ -53,7 +53,7 @@
 //! the square roots and divisions of several molecules overlap.
 
 use super::*;
-use crate::tolerance::{relative_dot_after, worse, HIDDEN_LIMIT};
+use crate::tolerance::{relative_dot_after, roundoff_floor, worse, HIDDEN_LIMIT};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 /// The pairs of local particles of a triangle, pair k = s0 + s1 − 1 for a
@@ -485,6 +485,23 @@ fn worst_of<T: Real>(r: &V3<T>, l: usize) -> (f64, usize) {
     (worst, at)
 }
 
+/// Whether every pair of lane l is within `tol` or the round-off floor of
+/// its two particles' coordinates (`tolerance::roundoff_floor`): far from
+/// the origin the coordinates cannot resolve a bond to `tol`, and the
+/// closed form's answer is then as good as f64 holds it.
+#[cold]
+fn at_roundoff<T: Real>(x: &[V3<T>; 3], r: &V3<T>, l: usize, tol: f64) -> bool {
+    PAIRS.iter().enumerate().all(|(k, &(i, j))| {
+        let (mut n2, mut e2) = (0.0, 0.0);
+        for c in 0..3 {
+            let (a, b) = (x[i][c].lane(l), x[j][c].lane(l));
+            n2 += a * a + b * b;
+            e2 += 0.5 * (a - b) * (a - b);
+        }
+        r[k].lane(l) <= tol.max(roundoff_floor(n2, e2))
+    })
+}
+
 /// What [`project`] gives for a batch: the projected momenta, N's
 /// determinant (> 0 when N is positive definite), and per pair the bond
 /// e_k, the hidden constraint e_k · (v_i − v_j) after the projection and
@@ -710,7 +727,8 @@ fn shake_batch<S: Stencil, T: Real>(
     }
     for (l, r) in batch.iter().enumerate() {
         let (worst, _) = worst_of(&res, l);
-        if !(shape.ok && sol.valid(l) && worst <= args.tol) {
+        let met = worst <= args.tol || at_roundoff(&sol.x1, &res, l, args.tol);
+        if !(shape.ok && sol.valid(l) && met) {
             shake_fixed::<S, 3, 3, 9>(w, f, r.c, stencil, table, plan, args, fuse, q, p)?;
             continue;
         }
