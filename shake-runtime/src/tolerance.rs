@@ -323,11 +323,18 @@ pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
 /// member's coordinates x (each by up to ε|x_i|) can leave: ε ‖x‖ /
 /// extent, times 4 for the rounding of g's own evaluation
 /// ([`Residuals`](crate::newton::Residuals) accepts a stalled iteration
-/// there). From ‖x‖² and extent².
+/// there), and never above [`ROUNDOFF_CAP`]. From ‖x‖² and extent².
 #[inline]
 pub(crate) fn roundoff_floor(x_norm2: f64, extent2: f64) -> f64 {
-    4.0 * f64::EPSILON * (x_norm2 / extent2).sqrt()
+    (4.0 * f64::EPSILON * (x_norm2 / extent2).sqrt()).min(ROUNDOFF_CAP)
 }
+
+/// √ε ≈ 1.5e-8: the largest residual accepted as round-off. Beyond it the
+/// coordinates are too large for the member to be resolved at all (a bond
+/// of 1 at 10¹⁵ has a floor above 1, where any iterate would "converge"
+/// and the first-order residual no longer measures the bond error): the
+/// solve fails as `NotConverged` instead of passing such a step.
+pub(crate) const ROUNDOFF_CAP: f64 = 1.4901161193847656e-8;
 
 /// Whether a residual r replaces `worst` in a running maximum: r larger,
 /// or r NaN, and never once `worst` is NaN. `if !(r <= worst)` alone keeps

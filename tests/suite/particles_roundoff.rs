@@ -4,7 +4,10 @@
 //! Newton iterations accept a stalled residual there (reporting it as it
 //! is) instead of spending their budget and failing.
 
-use geoshake::runtime::particles::{generate, Options, ParticleState, Rattle, SolverChoice};
+use geoshake::runtime::particles::{
+    generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
+    Table,
+};
 
 /// The state moved by `shift` in every coordinate.
 fn shifted(state: &ParticleState, shift: f64) -> ParticleState {
@@ -72,4 +75,69 @@ fn a_chain_far_from_the_origin_converges_to_round_off_on_the_sparse_path() {
         SolverChoice::Sparse,
         generate::BOND,
     );
+}
+
+/// A bond of 1 at 4·10¹⁵, where a coordinate's ulp is 0.5: nothing can
+/// resolve it, and its round-off floor (above 1) is capped at √ε, so a step
+/// fails instead of passing a bond of any length.
+#[test]
+fn a_bond_beyond_resolution_fails_instead_of_passing() {
+    let x = 4e15;
+    let mut bond = Table::new(2, 1);
+    bond.push(&[0, 1], &[1.0]).unwrap();
+    let system = ParticleSystem::new(3, vec![1.0, 1.0])
+        .unwrap()
+        .with_constraints("bond", Distance::<3>, bond)
+        .unwrap();
+    let mut rattle = Rattle::new(system, 0.1, Options::default()).unwrap();
+    let mut state = ParticleState::new(
+        vec![x, x, x, x + 1.0, x, x],
+        vec![0.0, 3.0, 0.0, 0.0, -3.0, 0.0],
+    );
+    for step in 1..=5 {
+        let before = state.clone();
+        match rattle.step(&mut state) {
+            Err(_) => {
+                state = before;
+            }
+            Ok(info) => {
+                let q = state.q();
+                let r =
+                    ((q[0] - q[3]).powi(2) + (q[1] - q[4]).powi(2) + (q[2] - q[5]).powi(2)).sqrt();
+                panic!(
+                    "step {step} passed: residual {:?}, |r| = {r}",
+                    info.residual
+                );
+            }
+        }
+    }
+}
+
+/// A dimer projected onto M from 100 bond lengths away, at 10⁸ from the
+/// origin (floor ≈ 1.5e-8, the cap): the stall is judged and reported at
+/// the result's own scale, not at the far start's (which is 10⁴ times
+/// smaller and reported 1e-12 for a bond error of 1e-8).
+#[test]
+fn a_projection_reports_the_residual_at_its_own_scale() {
+    let (x, far) = (1e8, 100.0);
+    let mut bond = Table::new(2, 1);
+    bond.push(&[0, 1], &[1.0]).unwrap();
+    let system = ParticleSystem::new(3, vec![1.0, 1.0])
+        .unwrap()
+        .with_constraints("bond", Distance::<3>, bond)
+        .unwrap();
+    let mut rattle = Rattle::new(system, 0.1, Options::default()).unwrap();
+    let mut state =
+        ParticleState::new(vec![x, x, x, x + 0.6 * far, x + 0.8 * far, x], vec![0.0; 6]);
+    let info = rattle.project(&mut state).unwrap();
+    {
+        let q = state.q();
+        let r = ((q[0] - q[3]).powi(2) + (q[1] - q[4]).powi(2) + (q[2] - q[5]).powi(2)).sqrt();
+        let actual = (r - 1.0).abs();
+        let reported = info.residual.unwrap();
+        assert!(
+            reported >= 0.5 * actual,
+            "reported {reported:e}, bond error {actual:e}"
+        );
+    }
 }

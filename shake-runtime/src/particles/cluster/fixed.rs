@@ -252,14 +252,29 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
         }
         rescale = false;
         let failed = || unsolved(members[worst_j] as usize, worst, it);
+        // A stall is judged at this iterate's own scale (the kept one may
+        // be a far start's), and reported so.
+        let mut at_own = worst;
         let at_roundoff = || {
-            (0..MC).all(|j| {
-                let n2: f64 = at_s[j][..wd].iter().map(|v| v * v).sum();
-                gv[j].abs() * inv_s[j] <= args.tol.max(roundoff_floor(n2, e2_s[j]))
-            })
+            let (mut xs, mut gs) = ([0.0; 9], [0.0; 9]);
+            let mut all = true;
+            at_own = 0.0;
+            for j in 0..MC {
+                gather_fixed::<S, NX>(&sl[j], &x, &mut xs);
+                let g = stencil.gradient(&xs[..wd], data[j], &mut gs[..wd]);
+                let (inv, e2) = member_scale::<S>(&gs[..wd], &xs[..wd]);
+                let n2: f64 = xs[..wd].iter().map(|v| v * v).sum();
+                let r = g.abs() * inv;
+                all &= r <= args.tol.max(roundoff_floor(n2, e2));
+                if crate::tolerance::worse(r, at_own) {
+                    at_own = r;
+                }
+            }
+            all
         };
         let judged = rate.judge(worst, it, at_roundoff);
         if judged == Rate::RoundOff {
+            let worst = at_own;
             w.max_rel = w.max_rel.max(worst);
             w.max_it = w.max_it.max(it);
             w.iters += it as u64;

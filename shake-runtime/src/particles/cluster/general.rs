@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::newton::{Rate, Residuals};
-use crate::particles::stencil::{extent2, member_scale};
+use crate::particles::stencil::member_scale;
 use crate::tolerance::{relative_dot_after, roundoff_floor, HIDDEN_LIMIT};
 
 pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
@@ -288,17 +288,30 @@ pub(super) fn shake_one<S: Stencil>(
             break;
         }
         let failed = || unsolved(members[worst_j] as usize, worst, it);
+        // A stall is judged at this iterate's own scale (the kept one may
+        // be a far start's), and reported so.
+        let mut at_own = worst;
         let at_roundoff = || {
-            let mut xm = [0.0; ML];
-            (0..mc).all(|j| {
-                gather_member::<S>(&slots[j * ar..(j + 1) * ar], &l.x, &mut xm);
-                let n2: f64 = xm[..wd].iter().map(|v| v * v).sum();
-                let floor = roundoff_floor(n2, extent2::<S>(&xm[..wd]));
-                l.g[j].abs() * inv_s[j] <= args.tol.max(floor)
-            })
+            let (mut xs, mut gs) = ([0.0; ML], [0.0; ML]);
+            let mut all = true;
+            at_own = 0.0;
+            for j in 0..mc {
+                gather_member::<S>(&slots[j * ar..(j + 1) * ar], &l.x, &mut xs);
+                let data = table.data(members[j] as usize);
+                let g = stencil.gradient(&xs[..wd], data, &mut gs[..wd]);
+                let (inv, e2) = member_scale::<S>(&gs[..wd], &xs[..wd]);
+                let n2: f64 = xs[..wd].iter().map(|v| v * v).sum();
+                let r = g.abs() * inv;
+                all &= r <= args.tol.max(roundoff_floor(n2, e2));
+                if crate::tolerance::worse(r, at_own) {
+                    at_own = r;
+                }
+            }
+            all
         };
         let judged = rate.judge(worst, it, at_roundoff);
         if judged == Rate::RoundOff {
+            let worst = at_own;
             *max_rel = max_rel.max(worst);
             *max_it = (*max_it).max(it);
             *iters += it as u64;

@@ -33,7 +33,12 @@
 //! with A, B, C sums of 2-D cross and dot products of the old, tilted and
 //! unconstrained in-plane coordinates. The branch taken is the one through
 //! the identity (cos φ, cos ψ > 0, θ near 0 when x̃ is near x0), the one
-//! Newton from x̃ converges to for the steps a simulation takes.
+//! Newton from x̃ converges to for the steps a simulation takes. At large
+//! steps of light, flat triangles it can be another root of the same
+//! equations: an answer that moves a particle by more than an eighth of
+//! the shortest length from x̃ ([`near_branch`]) goes to Newton, and so
+//! does a triangle whose masses lie more than [`MAX_MASS_RATIO`] apart
+//! (the placement loses ~ε √(m_max / m_min) |x| out of the old plane).
 //!
 //! Where the closed form has no answer (an old triangle collinear to
 //! working precision, a step so large that the heights or the torque
@@ -242,6 +247,33 @@ pub(super) struct Shape {
     inv_det: f64,
     /// A strict triangle with finite masses (else no closed form).
     ok: bool,
+    /// The smallest squared length ([`near_branch`]).
+    min_d2: f64,
+}
+
+/// The largest ratio of two masses of a triangle taken in closed form. The
+/// rigid placement loses about ε √(m_max / m_min) of |x| out of the old
+/// plane (Newton: none); at 10⁴ that is ~100 ε, beyond it the triangle
+/// goes to the Newton kernel. Water: 16.
+const MAX_MASS_RATIO: f64 = 1e4;
+
+/// Whether lane l's x1 is within an eighth of the shortest length of the
+/// unconstrained x̃ for every particle. The closed form takes the branch of
+/// the torque equation nearest θ = 0, which at large steps of light,
+/// flat triangles can be another SHAKE root than the one Newton from x̃
+/// reaches (both solve the equations); within this bound, the correction
+/// a simulation's step asks for (h²-small), the branch is the one through
+/// the identity. Beyond it the triangle goes to the Newton kernel.
+#[inline(always)]
+fn near_branch<T: Real>(x1: &[V3<T>; 3], xt: &[V3<T>; 3], l: usize, min_d2: f64) -> bool {
+    (0..3).all(|a| {
+        let mut r2 = 0.0;
+        for c in 0..3 {
+            let d = x1[a][c].lane(l) - xt[a][c].lane(l);
+            r2 += d * d;
+        }
+        r2 <= min_d2 / 64.0
+    })
 }
 
 impl Shape {
@@ -278,7 +310,13 @@ impl Shape {
             p22,
             p12,
             inv_det,
-            ok: h2 > 0.0 && finite && inv_det.is_finite() && inv_det > 0.0,
+            ok: h2 > 0.0
+                && finite
+                && inv_det.is_finite()
+                && inv_det > 0.0
+                && m.iter().fold(0.0f64, |a, &v| a.max(v))
+                    <= MAX_MASS_RATIO * m.iter().fold(f64::INFINITY, |a, &v| a.min(v)),
+            min_d2: d2[0].min(d2[1]).min(d2[2]),
         }
     }
 
@@ -728,7 +766,7 @@ fn shake_batch<S: Stencil, T: Real>(
     for (l, r) in batch.iter().enumerate() {
         let (worst, _) = worst_of(&res, l);
         let met = worst <= args.tol || at_roundoff(&sol.x1, &res, l, args.tol);
-        if !(shape.ok && sol.valid(l) && met) {
+        if !(shape.ok && sol.valid(l) && met && near_branch(&sol.x1, &xt, l, shape.min_d2)) {
             shake_fixed::<S, 3, 3, 9>(w, f, r.c, stencil, table, plan, args, fuse, q, p)?;
             continue;
         }
