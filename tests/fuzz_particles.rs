@@ -12,9 +12,12 @@
 //!
 //! Every case must end in one of two ways:
 //! - `Ok`, with finite numbers, every bond of a state the call put on M
-//!   within | |r| − |l| | / |l| ≤ 2·tol + 16ε of its length (the solvers'
-//!   residual |g| / (|∇g| · extent) is that ratio to first order, measured
-//!   at the state returned: `tolerance::inverse_scale`), for RATTLE and
+//!   within | |r| − |l| | / |l| ≤ 2·max(tol, floor) + 16ε of its length
+//!   (the solvers' residual |g| / (|∇g| · extent) is that ratio to first
+//!   order, measured at the state returned: `tolerance::inverse_scale`;
+//!   floor = min(4ε ‖(x_i, x_j)‖ / extent, √ε), the round-off of the
+//!   bond's coordinates, at which a stalled solve is accepted:
+//!   `tolerance::roundoff_floor`), for RATTLE and
 //!   the projections the hidden constraint |∇g · M⁻¹p| within 4·√ε of
 //!   |∇g| times the larger of the member's velocity |M⁻¹p| returned and
 //!   the one given, or for a step the one its velocity stage started from
@@ -572,8 +575,9 @@ fn finite(v: &[f64]) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
-/// `None` when every bond of q is within 2·tol + 16ε of its length
-/// (relative), else which is not.
+/// `None` when every bond of q is within 2·max(tol, floor) + 16ε of its
+/// length (relative; floor the round-off of its coordinates, see the
+/// module docs), else which is not.
 fn off_m(b: &Built, tol: f64, q: &[f64]) -> Option<String> {
     if !finite(q) {
         return Some("non-finite positions".into());
@@ -589,9 +593,16 @@ fn off_m(b: &Built, tol: f64, q: &[f64]) -> Option<String> {
         } else {
             (r - l).abs() / l
         };
-        if !(rel <= 2.0 * tol + 16.0 * f64::EPSILON) {
+        // The coordinates' round-off: 4ε ‖(x_i, x_j)‖ / extent, extent =
+        // |r| / √2 for a pair, at most √ε (as `tolerance::roundoff_floor`).
+        let n2: f64 = (0..d)
+            .map(|c| q[i * d + c].powi(2) + q[j * d + c].powi(2))
+            .sum();
+        let floor = (4.0 * f64::EPSILON * (2.0 * n2).sqrt() / r).min(f64::EPSILON.sqrt());
+        let floor = if floor.is_nan() { 0.0 } else { floor };
+        if !(rel <= 2.0 * tol.max(floor) + 16.0 * f64::EPSILON) {
             return Some(format!(
-                "bond ({i}, {j}) of length {l:e}: | |r| − l | / l = {rel:.2e} > 2·tol, tol = {tol:e}"
+                "bond ({i}, {j}) of length {l:e}: | |r| − l | / l = {rel:.2e} > 2·max(tol, floor), tol = {tol:e}, floor = {floor:e}"
             ));
         }
     }
