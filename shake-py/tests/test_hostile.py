@@ -316,10 +316,17 @@ def bonds_on_m(pairs, lengths, x, tol):
     rel = np.abs(r - l) / l
     if not np.all(np.isfinite(x)):
         raise Silent("shake_positions: Ok with non-finite positions")
-    if rel.size and not np.max(rel) <= 2 * tol + 16 * EPS:
+    # The round-off of a bond's coordinates, at which the solver accepts a
+    # stalled iteration: min(4ε ‖(x_i, x_j)‖ / extent, √ε), extent = r / √2
+    # (geoshake_runtime's tolerance::roundoff_floor).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n2 = (x[pairs[:, 0]] ** 2).sum(1) + (x[pairs[:, 1]] ** 2).sum(1)
+        floor = np.minimum(4 * EPS * np.sqrt(2 * n2) / r, np.sqrt(EPS))
+    floor = np.nan_to_num(floor, nan=0.0)
+    if rel.size and not np.all(rel <= 2 * np.maximum(tol, floor) + 16 * EPS):
         raise Silent(
             f"shake_positions: Ok with a bond off by {np.max(rel):.2e} (tol {tol:.1e}, "
-            f"|x| up to {np.max(np.abs(x)):.1e})"
+            f"|x| up to {np.max(np.abs(x)):.1e}, floor up to {np.max(floor):.1e})"
         )
 
 
