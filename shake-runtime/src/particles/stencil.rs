@@ -73,6 +73,25 @@ pub(crate) fn member_scale<S: Stencil>(grad: &[f64], xm: &[f64]) -> (f64, f64) {
     (crate::tolerance::inverse_scale(n2, e2), e2)
 }
 
+/// A member's relative residual at its own coordinates `xm` (gradient
+/// into `grad`), and whether it is within `tol` or the round-off floor of
+/// those coordinates (`tolerance::roundoff_floor`): the per-member test of
+/// a stalled Newton iteration (`newton::Rate::RoundOff`).
+#[inline]
+pub(crate) fn member_at_roundoff<S: Stencil>(
+    stencil: &S,
+    xm: &[f64],
+    data: &[f64],
+    grad: &mut [f64],
+    tol: f64,
+) -> (bool, f64) {
+    let g = stencil.gradient(xm, data, grad);
+    let (inv, e2) = member_scale::<S>(grad, xm);
+    let n2: f64 = xm.iter().map(|v| v * v).sum();
+    let r = g.abs() * inv;
+    (r <= tol.max(crate::tolerance::roundoff_floor(n2, e2)), r)
+}
+
 /// Squared extent of a member: Σ_a |x_a − x̄|² over its particles (|x_a|²
 /// for a single-particle member, whose constraint refers to the origin).
 #[inline(always)]

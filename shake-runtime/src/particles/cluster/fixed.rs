@@ -4,8 +4,8 @@
 
 use super::*;
 use crate::newton::{Rate, Residuals};
-use crate::particles::stencil::member_scale;
-use crate::tolerance::{relative_dot_after, roundoff_floor, HIDDEN_LIMIT};
+use crate::particles::stencil::{member_at_roundoff, member_scale};
+use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
 /// Largest ARITY and DIM of a stencil the fixed-size kernel takes.
 pub(super) const FX: usize = 3;
@@ -261,11 +261,9 @@ pub(super) fn shake_fixed<S: Stencil, const MC: usize, const NP: usize, const NX
             at_own = 0.0;
             for j in 0..MC {
                 gather_fixed::<S, NX>(&sl[j], &x, &mut xs);
-                let g = stencil.gradient(&xs[..wd], data[j], &mut gs[..wd]);
-                let (inv, e2) = member_scale::<S>(&gs[..wd], &xs[..wd]);
-                let n2: f64 = xs[..wd].iter().map(|v| v * v).sum();
-                let r = g.abs() * inv;
-                all &= r <= args.tol.max(roundoff_floor(n2, e2));
+                let (within, r) =
+                    member_at_roundoff(stencil, &xs[..wd], data[j], &mut gs[..wd], args.tol);
+                all &= within;
                 if crate::tolerance::worse(r, at_own) {
                     at_own = r;
                 }

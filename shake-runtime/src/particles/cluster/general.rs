@@ -4,8 +4,8 @@
 
 use super::*;
 use crate::newton::{Rate, Residuals};
-use crate::particles::stencil::member_scale;
-use crate::tolerance::{relative_dot_after, roundoff_floor, HIDDEN_LIMIT};
+use crate::particles::stencil::{member_at_roundoff, member_scale};
+use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
 pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
 
@@ -298,11 +298,9 @@ pub(super) fn shake_one<S: Stencil>(
             for j in 0..mc {
                 gather_member::<S>(&slots[j * ar..(j + 1) * ar], &l.x, &mut xs);
                 let data = table.data(members[j] as usize);
-                let g = stencil.gradient(&xs[..wd], data, &mut gs[..wd]);
-                let (inv, e2) = member_scale::<S>(&gs[..wd], &xs[..wd]);
-                let n2: f64 = xs[..wd].iter().map(|v| v * v).sum();
-                let r = g.abs() * inv;
-                all &= r <= args.tol.max(roundoff_floor(n2, e2));
+                let (within, r) =
+                    member_at_roundoff(stencil, &xs[..wd], data, &mut gs[..wd], args.tol);
+                all &= within;
                 if crate::tolerance::worse(r, at_own) {
                     at_own = r;
                 }
