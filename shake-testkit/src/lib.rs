@@ -11,7 +11,7 @@
 //!   counts by verdict);
 //! - [`hopf_lab`]: the computations behind the Section 5.4 scenes and
 //!   `tests/suite/paper_hopf.rs`;
-//! - [`plot`]: the figure helpers of `examples/paper` and
+//! - [`plot`]: the figure helpers of the paper scene (`paper/`) and
 //!   `examples/work_precision.rs`;
 //! - [`bench`](mod@bench): chains, dual-number baselines, the hand-written limit and the
 //!   report tables of `benches/step_cost.rs`, `examples/scaling.rs` and
@@ -25,6 +25,7 @@
 
 pub mod alloc;
 pub mod bench;
+#[cfg(feature = "fuzz")]
 pub mod fuzz;
 pub mod hopf_lab;
 pub mod models;

@@ -6,7 +6,7 @@
 //! a pixel high and some pairs drift apart. [`Crisp`] wraps the bitmap
 //! backend and places every glyph on one baseline with ab_glyph directly;
 //! everything else, and the text boxes plotters lays out, stay as they are.
-//! (The paper scene, examples/paper/plot.rs, draws its figures the same
+//! (The paper scene, with the test kit's plot.rs, draws its figures the same
 //! way; it builds without this feature, so it keeps its own copy.)
 
 use plotters::prelude::*;

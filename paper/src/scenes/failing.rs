@@ -52,7 +52,7 @@ pub fn run(_ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
 
 /// Prints the compile-time refusals that the trybuild tests check.
 fn compile_time_messages() {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/ui");
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/ui");
     for case in [
         "nondegeneracy_index_five",
         "nondegeneracy_constant_on_fibres",

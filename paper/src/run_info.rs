@@ -45,7 +45,7 @@ pub fn preamble(quick: bool, seconds: f64) -> String {
 
 /// The commit of the sources: `git rev-parse HEAD` in the crate's directory at
 /// run time (with "+ uncommitted changes" when the tree is dirty), else the
-/// `SHAKE_GIT_COMMIT` variable set when the example was built, else unknown.
+/// `SHAKE_GIT_COMMIT` variable set when the scene was built, else unknown.
 fn commit() -> String {
     let dir = env!("CARGO_MANIFEST_DIR");
     let git = |args: &[&str]| {
@@ -111,7 +111,7 @@ fn machine() -> String {
 /// The command as typed, with its cargo equivalent when run through cargo.
 fn command_line() -> String {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut cmd = String::from("cargo run --release --example paper");
+    let mut cmd = String::from("cargo run --release -p geoshake-paper");
     if !args.is_empty() {
         cmd.push_str(" -- ");
         cmd.push_str(&args.join(" "));

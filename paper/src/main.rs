@@ -2,7 +2,7 @@
 //! *Geometric generalisations of SHAKE and RATTLE*, run with shake, with its
 //! figures drawn and its claims checked.
 //!
-//!     cargo run --release --example paper [-- --quick] [--out DIR]
+//!     cargo run --release -p geoshake-paper [-- --quick] [--out DIR]
 //!
 //! Writes PNG, SVG and CSV figures and `claims.md` / `claims.csv` (claim,
 //! measured value, the bound the theory gives, pass/fail) into `DIR`
