@@ -38,7 +38,9 @@ pub mod topology;
 
 mod declare;
 
-pub use declare::{declare, declare_particles, DeclError, Declared, DeclaredParticles, FamilyShape};
+pub use declare::{
+    declare, declare_particles, DeclError, Declared, DeclaredParticles, FamilyShape,
+};
 
 use diff::Derived;
 use lower::System;

@@ -50,7 +50,6 @@ fn int_op(op: BinOp, a: i64, b: i64, at: Span) -> Result<i64, Error> {
 const NOT_INT: &str =
     "expected a compile-time integer (literals and `sum` indices, with `+ - * / %`)";
 
-
 /// The arithmetic of a template, in one of two forms. Canonical (`raw ==
 /// false`): the smart constructors of `simplify`, whose canonical form makes
 /// the checks exact and the derivatives small. Raw: nodes as the user wrote
