@@ -7,7 +7,9 @@
 //! Registers `0..d` hold q, `d..2d` hold p, `2d..2d+m` hold λ, then come the
 //! parameters and the constants (the *statics*, copied in when another
 //! program last used the thread's register file),
-//! then one register per computed node. Hash-consing already made every
+//! then one register per computed node. A particle family's template
+//! ([`Stencil`]) has its own inputs (a member's coordinates, its row's
+//! numbers) in place of q, p and λ, and is compiled the same way. Hash-consing already made every
 //! shared subexpression one node, so, as for the macro's `let`s, a function
 //! is scheduled by collecting the nodes its outputs reach and computing
 //! each once, by increasing id (a topological order, by the graph's
