@@ -240,7 +240,7 @@ pub fn declare(src: &str) -> Result<Declared, DeclError> {
 /// assert_eq!((water.dim(), shapes[0].arity, shapes[0].data), (3, 2, 1));
 ///
 /// let Err(e) = declare_particles(&src.replace("x[b])", "x[c])")) else { panic!() };
-/// assert_eq!((e.line, e.column), (3, 72));
+/// assert_eq!((e.line, e.column), (3, 66));
 /// assert!(e.message.contains("`c` is not a particle of the table"), "{e}");
 /// ```
 pub fn declare_particles(src: &str) -> Result<DeclaredParticles, DeclError> {

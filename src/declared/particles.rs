@@ -33,7 +33,11 @@ pub(super) const MAX_DATA: usize = 4;
 /// stencil.
 ///
 /// Families of 1 to 4 particles in R² or R³ with at most 4 numbers per
-/// row (see the [module docs](self) for why these).
+/// row: the runtime compiles a cluster kernel for each stencil shape, so a
+/// declaration read at run time picks one of a few compiled shapes (the
+/// rows' numbers are padded with zeros to 4, so that their count does not
+/// multiply the shapes). Other shapes are refused with
+/// [`DeclareError::Shape`].
 ///
 /// ```
 /// use geoshake::declared::{DeclareError, DeclaredParticles};
@@ -94,7 +98,7 @@ impl DeclaredParticles {
     ///     constraints { c[k in t(a, b)]: norm2(x[a]) - 1 }
     /// }";
     /// let Err(DeclareError::Declaration(e)) = DeclaredParticles::new(src, &[]) else { panic!() };
-    /// assert_eq!((e.line, e.column), (3, 29));
+    /// assert_eq!((e.line, e.column), (3, 31));
     /// assert!(e.message.contains("does not depend on particle `b`"), "{e}");
     /// ```
     pub fn new(src: &str, parameters: &[(&str, f64)]) -> Result<Self, DeclareError> {

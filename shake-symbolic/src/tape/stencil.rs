@@ -13,7 +13,8 @@ use super::{check_registers, execute, next_id, shift, with_registers, Compiler, 
 use crate::topology::Lowered;
 use std::collections::HashMap;
 
-/// One family's template, compiled (see the [module docs](self)).
+/// One family's template, compiled: f(x; c) and its gradient with the
+/// operations of the stencil `constrained_system!` emits for it.
 ///
 /// `Send` and `Sync`: threads evaluate members of one family at once, each
 /// on its own register file.
