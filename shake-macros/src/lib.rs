@@ -3,10 +3,12 @@
 //! A thin shell over `geoshake-symbolic`, which holds the front end: `parse`
 //! the declaration into a typed view that keeps the user's spans, `lower` it
 //! into the hash-consed expression graph of `symbolic` (kept canonical by
-//! `simplify`), differentiate it (`diff`), `check` the paper's assumptions.
-//! This crate turns the result into tokens: `emit` straight-line code,
-//! scheduled by `cse`; `topology` does the same for particle systems. See
-//! [`constrained_system!`] for the grammar.
+//! `simplify`), differentiate it (`diff`), `check` the paper's assumptions;
+//! for a particle system, its `topology` lowers, differentiates and checks
+//! each family's template. This crate turns the result into tokens: `emit`
+//! straight-line code, scheduled by `cse`; `topology` does the same for the
+//! families of a particle system. See [`constrained_system!`] for the
+//! grammar.
 
 mod cse;
 mod emit;
@@ -15,7 +17,7 @@ mod topology;
 // The front end's modules under their old paths (`crate::diff::Derived`).
 #[cfg(test)]
 use geoshake_symbolic::check;
-use geoshake_symbolic::{diff, lower, parse, parse_topology, simplify, symbolic};
+use geoshake_symbolic::{diff, lower, parse, parse_topology, symbolic};
 
 #[cfg(test)]
 mod fuzz_tests;

@@ -3,7 +3,9 @@
 //! located by line and column in the string instead of by span.
 
 use crate::parse::SystemDef;
-use crate::{analyse, parse_topology, Analysis};
+use crate::parse_topology::{FamilyKind, ParticleDef};
+use crate::topology::Lowered;
+use crate::{analyse, parse_topology, topology, Analysis};
 use proc_macro2::TokenStream;
 use std::fmt;
 
@@ -45,6 +47,69 @@ impl Declared {
         let sys = &self.analysis.checked.0;
         sys.constraints.iter().map(|c| c.name.clone()).collect()
     }
+}
+
+/// A particle system (`particles x[D];`, families over run-time tables)
+/// that parsed and passed every check of the macro: each family's template
+/// lowered and differentiated, ready to be compiled into an evaluator
+/// ([`tape::Stencil`](crate::tape::Stencil)).
+///
+/// Like [`Declared`], it holds `proc_macro2` identifiers: neither `Send`
+/// nor `Sync`.
+pub struct DeclaredParticles {
+    /// The parsed declaration.
+    pub def: ParticleDef,
+    /// Every family's lowered template, in declaration order.
+    pub families: Vec<Lowered>,
+}
+
+impl DeclaredParticles {
+    /// The struct name of the declaration.
+    pub fn name(&self) -> String {
+        self.def.name.to_string()
+    }
+
+    /// The parameter names, in declaration order.
+    pub fn parameters(&self) -> Vec<String> {
+        self.def.params.iter().map(|p| p.to_string()).collect()
+    }
+
+    /// D, the dimension of each particle's position.
+    pub fn dim(&self) -> usize {
+        self.def.dim
+    }
+
+    /// The families, in declaration order (potential and constraint
+    /// families interleaved as written): name, kind, table name, ARITY
+    /// (particles per row) and DATA (numbers per row).
+    pub fn family_shapes(&self) -> Vec<FamilyShape> {
+        self.def
+            .families
+            .iter()
+            .map(|f| FamilyShape {
+                name: f.name.to_string(),
+                kind: f.kind,
+                table: f.table.to_string(),
+                arity: f.particles.len(),
+                data: f.data.len(),
+            })
+            .collect()
+    }
+}
+
+/// What a family of a [`DeclaredParticles`] needs of its table.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FamilyShape {
+    /// The family's name (`bond`).
+    pub name: String,
+    /// Constraint or potential.
+    pub kind: FamilyKind,
+    /// The table's name (`bonds`).
+    pub table: String,
+    /// Particle indices per row.
+    pub arity: usize,
+    /// Numbers per row.
+    pub data: usize,
 }
 
 /// A declaration refused: the message the macro would give as a compile
@@ -94,8 +159,8 @@ impl DeclError {
 /// as the macro does at compile time: the same refusals, with the same
 /// messages, located by line and column in `src`.
 ///
-/// Particle systems (`particles x[3]; ...`, run-time topologies) are not
-/// declarable this way yet and are refused.
+/// Particle systems (`particles x[3]; ...`, run-time topologies) are
+/// declared by [`declare_particles`] and refused here.
 ///
 /// # Limits
 ///
@@ -143,6 +208,60 @@ impl DeclError {
 /// assert!(e.message.contains("nested too deeply"), "{e}");
 /// ```
 pub fn declare(src: &str) -> Result<Declared, DeclError> {
+    let tokens = tokens(src)?;
+    if parse_topology::is_particle_system(&tokens) {
+        return Err(DeclError {
+            message: "this is a particle system (`particles x[D];`, families over run-time \
+                      tables): declare it with `declare_particles`"
+                .into(),
+            line: 1,
+            column: 1,
+        });
+    }
+    let def: SystemDef = syn::parse2(tokens).map_err(|e| DeclError::first(vec![e]))?;
+    let analysis = analyse(&def).map_err(DeclError::first)?;
+    Ok(Declared { def, analysis })
+}
+
+/// Parses and checks a particle system (`particles x[D];` with families
+/// over run-time tables) exactly as `constrained_system!` does at compile
+/// time: the same refusals with the same messages, located by line and
+/// column in `src` (the first, when the macro would report several). The
+/// limits are those of [`declare`].
+///
+/// ```
+/// use geoshake_symbolic::declare_particles;
+/// let src = "struct Water {
+///     particles x[3];
+///     constraints { bond[k in bonds(a, b; length)]: norm2(x[a] - x[b]) - length^2 }
+/// }";
+/// let water = declare_particles(src).unwrap();
+/// let shapes = water.family_shapes();
+/// assert_eq!((water.dim(), shapes[0].arity, shapes[0].data), (3, 2, 1));
+///
+/// let Err(e) = declare_particles(&src.replace("x[b])", "x[c])")) else { panic!() };
+/// assert_eq!((e.line, e.column), (3, 66));
+/// assert!(e.message.contains("`c` is not a particle of the table"), "{e}");
+/// ```
+pub fn declare_particles(src: &str) -> Result<DeclaredParticles, DeclError> {
+    let tokens = tokens(src)?;
+    if !parse_topology::is_particle_system(&tokens) {
+        return Err(DeclError {
+            message: "this is not a particle system (it has no `particles x[D];` item): \
+                      declare it with `declare`"
+                .into(),
+            line: 1,
+            column: 1,
+        });
+    }
+    let def: ParticleDef = syn::parse2(tokens).map_err(|e| DeclError::first(vec![e]))?;
+    let families = topology::analyse(&def).map_err(DeclError::first)?;
+    Ok(DeclaredParticles { def, families })
+}
+
+/// `src` split into tokens, with the bracket depth checked before anything
+/// recursive reads them.
+fn tokens(src: &str) -> Result<TokenStream, DeclError> {
     let tokens: TokenStream = src.parse().map_err(|e: proc_macro2::LexError| {
         DeclError::at(
             e.span(),
@@ -152,16 +271,5 @@ pub fn declare(src: &str) -> Result<Declared, DeclError> {
         )
     })?;
     crate::parse::check_bracket_depth(&tokens).map_err(|e| DeclError::first(vec![e]))?;
-    if parse_topology::is_particle_system(&tokens) {
-        return Err(DeclError {
-            message: "particle systems (run-time topologies) cannot be declared from a string \
-                      yet; declare them with `constrained_system!`"
-                .into(),
-            line: 1,
-            column: 1,
-        });
-    }
-    let def: SystemDef = syn::parse2(tokens).map_err(|e| DeclError::first(vec![e]))?;
-    let analysis = analyse(&def).map_err(DeclError::first)?;
-    Ok(Declared { def, analysis })
+    Ok(tokens)
 }

@@ -6,7 +6,10 @@
 //! need), and `check` (the paper's assumptions: coisotropy and
 //! nondegeneracy, Sections 3.2 and 5.2). The proc macro (`geoshake-macros`)
 //! turns the result into Rust code; a run-time path ([`declare`]) reads the
-//! same grammar from a string and evaluates the same graph.
+//! same grammar from a string and evaluates the same graph. Particle systems
+//! (families over run-time tables) go through `parse_topology` and
+//! `topology` (lowering, differentiation and the checks of each template),
+//! for the macro and for [`declare_particles`] alike.
 //!
 //! ```
 //! let src = "pub struct Pendulum {
@@ -31,10 +34,13 @@ pub mod parse_topology;
 pub mod simplify;
 pub mod symbolic;
 pub mod tape;
+pub mod topology;
 
 mod declare;
 
-pub use declare::{declare, DeclError, Declared};
+pub use declare::{
+    declare, declare_particles, DeclError, Declared, DeclaredParticles, FamilyShape,
+};
 
 use diff::Derived;
 use lower::System;

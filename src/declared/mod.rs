@@ -11,6 +11,12 @@
 //! implements [`Hamiltonian`] and [`ConstrainedSystem`] on it, so an
 //! [`Integrator`](crate::Integrator) runs it unchanged.
 //!
+//! Particle systems (`particles x[D];`, families over run-time tables) are
+//! declared the same way by [`DeclaredParticles`]: each family's template
+//! becomes a tape evaluating its value and gradient, and the system is a
+//! [`ParticleSystem`](crate::runtime::particles::ParticleSystem) that
+//! [`particles::Rattle`](crate::runtime::particles::Rattle) runs.
+//!
 //! ```
 //! use geoshake::declared::DeclaredSystem;
 //! use geoshake::{ImplicitMidpoint, Integrator, State};
@@ -35,6 +41,9 @@ use crate::runtime::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian}
 use geoshake_symbolic::diff::Kind;
 use geoshake_symbolic::tape::Program;
 pub use geoshake_symbolic::DeclError;
+pub use particles::{DeclaredParticles, FamilyKind, FamilyShape};
+
+mod particles;
 
 /// Why a run-time declaration was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -63,6 +72,63 @@ pub enum DeclareError {
         /// The name given twice.
         name: String,
     },
+    /// A particle family whose shape (particles per member, dimension) has
+    /// no run-time stencil: see [`DeclaredParticles`] for the shapes there
+    /// are.
+    #[error(
+        "family `{family}`: members of {arity} particles in R^{dim} have no run-time stencil \
+         (there are 1 to {max_arity} particles in R^2 or R^3, with at most {max_data} numbers \
+         per row); declare this system with `constrained_system!`",
+        max_arity = particles::MAX_ARITY,
+        max_data = particles::MAX_DATA
+    )]
+    Shape {
+        /// The family.
+        family: String,
+        /// Its particles per member.
+        arity: usize,
+        /// The particles' dimension.
+        dim: usize,
+        /// Its numbers per row.
+        data: usize,
+    },
+    /// [`DeclaredParticles::system`] was given another number of tables
+    /// than the declaration has families.
+    #[error("{got} tables given, the declaration has {expected} families ({tables})")]
+    Tables {
+        /// Tables given.
+        got: usize,
+        /// Families declared.
+        expected: usize,
+        /// The tables' names, in declaration order, comma-separated.
+        tables: String,
+    },
+    /// The tables or masses of a particle system: the runtime's refusal.
+    #[error(transparent)]
+    Topology(#[from] crate::runtime::particles::TopologyError),
+}
+
+/// The values of `names` from `given`, by name: every name once.
+fn parameter_values(names: &[String], given: &[(&str, f64)]) -> Result<Vec<f64>, DeclareError> {
+    let mut values: Vec<Option<f64>> = vec![None; names.len()];
+    for &(name, value) in given {
+        let i =
+            names
+                .iter()
+                .position(|n| n == name)
+                .ok_or_else(|| DeclareError::UnknownParameter {
+                    name: name.into(),
+                    declared: names.join(", "),
+                })?;
+        if values[i].replace(value).is_some() {
+            return Err(DeclareError::DuplicateParameter { name: name.into() });
+        }
+    }
+    values
+        .iter()
+        .zip(names)
+        .map(|(v, n)| v.ok_or_else(|| DeclareError::MissingParameter { name: n.clone() }))
+        .collect()
 }
 
 /// A constrained Hamiltonian system declared from a string (see the
@@ -90,23 +156,7 @@ impl DeclaredSystem {
     pub fn new(src: &str, parameters: &[(&str, f64)]) -> Result<Self, DeclareError> {
         let declared = geoshake_symbolic::declare(src)?;
         let names = declared.parameters();
-        let mut values: Vec<Option<f64>> = vec![None; names.len()];
-        for &(name, value) in parameters {
-            let i = names.iter().position(|n| n == name).ok_or_else(|| {
-                DeclareError::UnknownParameter {
-                    name: name.into(),
-                    declared: names.join(", "),
-                }
-            })?;
-            if values[i].replace(value).is_some() {
-                return Err(DeclareError::DuplicateParameter { name: name.into() });
-            }
-        }
-        let values = values
-            .iter()
-            .zip(&names)
-            .map(|(v, n)| v.ok_or_else(|| DeclareError::MissingParameter { name: n.clone() }))
-            .collect::<Result<Vec<f64>, _>>()?;
+        let values = parameter_values(&names, parameters)?;
         let (sys, der) = declared.analysis.values();
         Ok(DeclaredSystem {
             name: declared.name(),

@@ -7,7 +7,9 @@
 //! Registers `0..d` hold q, `d..2d` hold p, `2d..2d+m` hold λ, then come the
 //! parameters and the constants (the *statics*, copied in when another
 //! program last used the thread's register file),
-//! then one register per computed node. Hash-consing already made every
+//! then one register per computed node. A particle family's template
+//! ([`Stencil`]) has its own inputs (a member's coordinates, its row's
+//! numbers) in place of q, p and λ, and is compiled the same way. Hash-consing already made every
 //! shared subexpression one node, so, as for the macro's `let`s, a function
 //! is scheduled by collecting the nodes its outputs reach and computing
 //! each once, by increasing id (a topological order, by the graph's
@@ -32,6 +34,10 @@ use crate::symbolic::{Func, Graph, Node, NodeId};
 use std::cell::RefCell;
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
+
+mod stencil;
+
+pub use stencil::Stencil;
 
 /// One instruction: `dst = f(a, b)` on registers.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -159,18 +165,26 @@ fn next_id() -> u64 {
     NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
+/// Compiles the functions of one graph into tapes over one register
+/// layout: the inputs (variables, then λ or a row's data) in registers
+/// `0..inputs`, then the statics.
 struct Compiler<'a> {
     graph: &'a Graph,
-    dof: usize,
-    m: usize,
+    /// Registers before the statics.
+    inputs: usize,
+    /// The register of λ_0.
+    lambda: usize,
+    /// Parameters held as statics; `ParamId`s from here on are inputs
+    /// (a row's data), from register `data`.
     n_params: usize,
+    data: usize,
     statics: Vec<f64>,
     consts: HashMap<u64, u32>,
 }
 
 impl Compiler<'_> {
     fn base(&self) -> usize {
-        2 * self.dof + self.m
+        self.inputs
     }
 
     fn constant(&mut self, x: f64) -> u32 {
@@ -188,8 +202,11 @@ impl Compiler<'_> {
         match self.graph.node(id) {
             Node::Const(b) => Some(self.constant(f64::from_bits(*b))),
             Node::Var(v) => Some(v.0),
-            Node::Lambda(i) => Some((2 * self.dof) as u32 + i),
-            Node::Param(p) => Some((self.base() + p.0 as usize) as u32),
+            Node::Lambda(i) => Some(self.lambda as u32 + i),
+            Node::Param(p) if (p.0 as usize) < self.n_params => {
+                Some((self.base() + p.0 as usize) as u32)
+            }
+            Node::Param(p) => Some((self.data + p.0 as usize - self.n_params) as u32),
             _ => None,
         }
     }
@@ -407,9 +424,10 @@ impl Program {
         let n2 = 2 * d;
         let mut c = Compiler {
             graph: &sys.graph,
-            dof: d,
-            m,
+            inputs: n2 + m,
+            lambda: n2,
             n_params: sys.params.len(),
+            data: n2 + m,
             statics: params.to_vec(),
             consts: HashMap::new(),
         };
@@ -549,26 +567,8 @@ impl Program {
         lambda: &[f64],
         mut out: impl FnMut(usize, f64),
     ) {
-        REGISTERS.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut file) => {
-                let file = &mut *file;
-                if file.r.len() < tape.regs {
-                    file.r.resize(tape.regs, 0.0);
-                }
-                let fresh = file.statics_of != self.id;
-                file.statics_of = self.id;
-                self.run(tape, q, p, lambda, &mut file.r, fresh, &mut out);
-            }
-            // Re-entered from `out`: a file of its own.
-            Err(_) => self.run(
-                tape,
-                q,
-                p,
-                lambda,
-                &mut vec![0.0; tape.regs],
-                true,
-                &mut out,
-            ),
+        with_registers(self.id, tape.regs, |r, fresh| {
+            self.run(tape, q, p, lambda, r, fresh, &mut out)
         });
     }
 
@@ -611,6 +611,26 @@ impl Program {
     pub fn eval_into(&self, tape: &Tape, q: &[f64], p: &[f64], lambda: &[f64], out: &mut [f64]) {
         self.eval(tape, q, p, lambda, |i, v| out[i] = v);
     }
+}
+
+/// Runs `f` on a register file of at least `regs` entries, with whether
+/// the statics of program `id` must be copied in (another program used
+/// the file last, or it is new).
+#[inline]
+fn with_registers<R>(id: u64, regs: usize, f: impl FnOnce(&mut [f64], bool) -> R) -> R {
+    REGISTERS.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut file) => {
+            let file = &mut *file;
+            if file.r.len() < regs {
+                file.r.resize(regs, 0.0);
+            }
+            let fresh = file.statics_of != id;
+            file.statics_of = id;
+            f(&mut file.r, fresh)
+        }
+        // Re-entered from an output callback: a file of its own.
+        Err(_) => f(&mut vec![0.0; regs], true),
+    })
 }
 
 /// The interpreter loop.
