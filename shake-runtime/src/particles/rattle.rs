@@ -389,6 +389,13 @@ impl Rattle {
         self.run_step0 = std::mem::take(&mut self.start_step);
     }
 
+    /// Makes no state count as the last one this solver made: the next
+    /// step or run starts from its state as from a new one (the caches
+    /// are recomputed, not reused).
+    pub(crate) fn forget_last_state(&mut self) {
+        self.stamp = 0;
+    }
+
     /// The stamp of the state the last successful step made (0 when the
     /// last step failed or the caches were overwritten since).
     pub(super) fn last_stamp(&self) -> u64 {

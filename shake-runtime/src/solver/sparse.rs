@@ -144,7 +144,8 @@ impl SparseCholesky {
     pub fn factor(&mut self) -> Result<(), usize> {
         let a = SparseColMatRef::new(self.analysis.pattern.as_ref(), &self.values);
         let stack = MemStack::new(&mut self.stack);
-        self.analysis.symbolic
+        self.analysis
+            .symbolic
             .factorize_numeric_llt(
                 &mut self.factor,
                 a,
