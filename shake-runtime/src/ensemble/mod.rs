@@ -3,9 +3,10 @@
 //!
 //! Sampling and sensitivity studies run the same system, method and step
 //! size from many initial states; the runs are independent, so they are
-//! spread over the cores with rayon. Each worker thread clones the
-//! template once (its workspace included) and reuses it for every run it
-//! takes, so an ensemble allocates per thread, not per run or per step.
+//! spread over the cores with rayon. Each piece of work rayon hands a
+//! thread (a few per thread) clones the template once (its workspace
+//! included) and reuses the copy for every run in it, so an ensemble
+//! allocates per thread, not per run or per step.
 //! The results come back in the order of the initial states, and each run
 //! is the same computation as on one thread (the same floating-point
 //! operations in the same order): the results do not depend on the number
@@ -107,9 +108,10 @@ impl Template for Rattle {
 }
 
 /// `f(copy, k, &initial[k])` for every k, in parallel; the results in the
-/// order of `initial`. `copy` is a per-thread clone of `template` (for an
-/// [`Integrator`]: the same system, base map, h, method and options), the
-/// same one for every member its thread takes.
+/// order of `initial`. `copy` is a clone of `template` (for an
+/// [`Integrator`]: the same system, base map, h, method and options) made
+/// once per piece of work rayon hands a thread and reused for every
+/// member in it.
 ///
 /// ```
 /// use geoshake_runtime::{ensemble, Integrator, ImplicitMidpoint, State, examples::Pendulum};
