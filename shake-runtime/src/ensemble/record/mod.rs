@@ -174,7 +174,7 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
     // (a member that failed at its start): each is bounded by the words
     // its 2d (2m) numbers take only when the record holds some.
     for (what, size, held) in [("dof", d, n), ("constraints", m, n_diag)] {
-        if held > 0 && size.checked_mul(2).map_or(true, |w| w > len) {
+        if held > 0 && size.checked_mul(2).is_none_or(|w| w > len) {
             return Err(RecordError::Corrupted {
                 what,
                 value: size as u64,
