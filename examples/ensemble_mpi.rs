@@ -1,4 +1,5 @@
-//! An ensemble of pendulums over MPI ranks (`--features mpi`).
+//! An ensemble of pendulums, or of boxes of rigid water, over MPI ranks
+//! (`--features mpi`).
 //!
 //! ```sh
 //! cargo build --release --features mpi --example ensemble_mpi
@@ -10,8 +11,12 @@
 //!
 //! Member k is the pendulum of the paper's Example 1.3 released at angle
 //! θ_k = 3 (k + ½)/N from the downward vertical with angular velocity
-//! ω_k = ½ sin k, run with RATTLE over Störmer–Verlet. Options:
+//! ω_k = ½ sin k, run with RATTLE over Störmer–Verlet. With `--system
+//! water`, member k is a box of `--waters W` (default 20) rigid waters on
+//! the particle path at 100 + 300 (k + ½)/N K, h = 2 fs unless `--h` says
+//! otherwise. Options:
 //!
+//! - `--system pendulum|water` (pendulum);
 //! - `--members N` (default 2000), `--steps S` (1000), `--h H` (0.01),
 //!   `--stride K` (S: the first and last state are kept);
 //! - `--threads T`: rayon threads per rank (default: rayon's choice);
@@ -20,7 +25,9 @@
 //!   batches, as a job at its wall-time limit would);
 //! - `--fail k1,k2,…`: make these members fail, alternately with a NaN
 //!   initial state (an error at step 0) and spinning at ω = 100 (a SHAKE
-//!   Newton failure a few steps in, with a partial trajectory);
+//!   Newton failure a few steps in, with a partial trajectory); for water,
+//!   a NaN momentum, and a molecule collapsed onto its oxygen (a failure at
+//!   its first bond in step 1, the start state kept);
 //! - `--check`: rank 0 also runs the ensemble in this process with
 //!   `geoshake_runtime::run_ensemble` and checks every gathered outcome against
 //!   it bit for bit, and the injected failures; exit status 1 if not.
@@ -28,17 +35,20 @@
 //! The last line printed (by rank 0) is
 //! `ensemble members=… ok=… failed=… ranks=… threads=… members_per_s=…`.
 
-use geoshake::ensemble::pack_outcome;
+use geoshake::ensemble::{pack_outcome, Template};
 use geoshake::ensemble_mpi::{run_ensemble_mpi, MpiEnsemble};
 use geoshake::examples::Pendulum;
 use geoshake::mpi::{self, traits::Communicator, Threading};
+use geoshake::particles::{generate, Options, ParticleState, Rattle};
 use geoshake::{run_ensemble, Integrator, State, Stop, StormerVerlet};
 use std::process::ExitCode;
 
 struct Args {
+    water: bool,
+    waters: usize,
     members: usize,
     steps: u64,
-    h: f64,
+    h: Option<f64>,
     stride: Option<u64>,
     threads: Option<usize>,
     options: MpiEnsemble,
@@ -48,9 +58,11 @@ struct Args {
 
 fn parse() -> Result<Args, String> {
     let mut a = Args {
+        water: false,
+        waters: 20,
         members: 2000,
         steps: 1000,
-        h: 0.01,
+        h: None,
         stride: None,
         threads: None,
         options: MpiEnsemble::default(),
@@ -66,9 +78,17 @@ fn parse() -> Result<Args, String> {
         let value = it.next().ok_or(format!("{flag} needs a value"))?;
         let bad = |e: &dyn std::fmt::Display| format!("{flag} {value}: {e}");
         match flag.as_str() {
+            "--system" => {
+                a.water = match value.as_str() {
+                    "pendulum" => false,
+                    "water" => true,
+                    _ => return Err(bad(&"not pendulum or water")),
+                }
+            }
+            "--waters" => a.waters = value.parse().map_err(|e| bad(&e))?,
             "--members" => a.members = value.parse().map_err(|e| bad(&e))?,
             "--steps" => a.steps = value.parse().map_err(|e| bad(&e))?,
-            "--h" => a.h = value.parse().map_err(|e| bad(&e))?,
+            "--h" => a.h = Some(value.parse().map_err(|e| bad(&e))?),
             "--stride" => a.stride = Some(value.parse().map_err(|e| bad(&e))?),
             "--threads" => a.threads = Some(value.parse().map_err(|e| bad(&e))?),
             "--batch" => a.options.batch = value.parse().map_err(|e| bad(&e))?,
@@ -87,7 +107,7 @@ fn parse() -> Result<Args, String> {
 }
 
 /// Member k's initial state (the same on every rank).
-fn initial(a: &Args) -> Vec<State> {
+fn pendulums(a: &Args) -> Vec<State> {
     let pendulum = Pendulum::default();
     (0..a.members)
         .map(|k| match a.fail.iter().position(|&f| f == k) {
@@ -99,6 +119,33 @@ fn initial(a: &Args) -> Vec<State> {
             }
         })
         .collect()
+}
+
+/// The water boxes' solver and member k's initial state.
+fn waters(a: &Args) -> Result<(Rattle, Vec<ParticleState>), String> {
+    let (system, mut state) = generate::water(a.waters, 1).map_err(|e| e.to_string())?;
+    let h = a.h.unwrap_or(2.0);
+    let mut rattle = Rattle::new(system, h, Options::default()).map_err(|e| e.to_string())?;
+    rattle.project(&mut state).map_err(|e| e.to_string())?;
+    let starts = (0..a.members)
+        .map(|k| {
+            let mut s = state.clone();
+            let kelvin = 100.0 + 300.0 * (k as f64 + 0.5) / a.members as f64;
+            generate::set_temperature(rattle.system(), &mut s, kelvin);
+            match a.fail.iter().position(|&f| f == k) {
+                Some(j) if j % 2 == 0 => s.p_mut()[0] = f64::NAN,
+                Some(_) => {
+                    let q = s.q_mut();
+                    let oxygen = [q[0], q[1], q[2]];
+                    q[3..6].copy_from_slice(&oxygen);
+                    q[6..9].copy_from_slice(&oxygen);
+                }
+                None => {}
+            }
+            s
+        })
+        .collect();
+    Ok((rattle, starts))
 }
 
 fn main() -> ExitCode {
@@ -128,18 +175,42 @@ fn main() -> ExitCode {
 }
 
 fn run(a: &Args, world: &impl Communicator) -> ExitCode {
-    let rattle = Integrator::new(Pendulum::default(), StormerVerlet, a.h).rattle();
-    let starts = initial(a);
+    if !a.water {
+        let h = a.h.unwrap_or(0.01);
+        let rattle = Integrator::new(Pendulum::default(), StormerVerlet, h).rattle();
+        let job = format!("pendulum rattle stormer-verlet h={h:e}");
+        return run_members(a, world, &rattle, &pendulums(a), &job);
+    }
+    match waters(a) {
+        Ok((rattle, starts)) => {
+            let job = format!("water waters={} h={:e}", a.waters, rattle.step_size());
+            run_members(a, world, &rattle, &starts, &job)
+        }
+        Err(e) => {
+            eprintln!("ensemble_mpi: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// The ensemble of `starts` from `template`, over the ranks of `world`.
+fn run_members<T: Template>(
+    a: &Args,
+    world: &impl Communicator,
+    template: &T,
+    starts: &[T::Start],
+    job: &str,
+) -> ExitCode {
     let stop = Stop::Steps(a.steps);
     let stride = a.stride.unwrap_or(a.steps.max(1));
     let mut options = a.options.clone();
     // What identifies this ensemble in a store's manifest.
     options.job = format!(
-        "ensemble_mpi pendulum rattle stormer-verlet h={:e} steps={} stride={stride} fail={:?}",
-        a.h, a.steps, a.fail
+        "ensemble_mpi {job} steps={} stride={stride} fail={:?}",
+        a.steps, a.fail
     );
     options.collect = a.check;
-    let results = match run_ensemble_mpi(world, &rattle, &starts, stop, stride, &options) {
+    let results = match run_ensemble_mpi(world, template, starts, stop, stride, &options) {
         Ok(r) => r,
         Err(e) => {
             eprintln!("ensemble_mpi (rank {}): {e}", world.rank());
@@ -152,7 +223,7 @@ fn run(a: &Args, world: &impl Communicator) -> ExitCode {
     let s = &results.summary;
     let mut code = ExitCode::SUCCESS;
     if a.check {
-        match check(a, &rattle, &starts, stop, stride, &results.outcomes) {
+        match check(a, template, starts, stop, stride, &results.outcomes) {
             Ok(n) => println!("check ok: {n} gathered members bit-identical to run_ensemble"),
             Err(e) => {
                 println!("check FAILED: {e}");
@@ -176,15 +247,15 @@ fn run(a: &Args, world: &impl Communicator) -> ExitCode {
 /// Every finished member against the same ensemble run in this process,
 /// compared as packed words (IEEE bits); the injected failures must have
 /// failed, with their error, and every other member must have succeeded.
-fn check(
+fn check<T: Template>(
     a: &Args,
-    rattle: &Integrator<Pendulum, StormerVerlet>,
-    starts: &[State],
+    template: &T,
+    starts: &[T::Start],
     stop: Stop,
     stride: u64,
     gathered: &[Option<geoshake::RunOutcome>],
 ) -> Result<usize, String> {
-    let here = run_ensemble(rattle, starts, stop, stride);
+    let here = run_ensemble(template, starts, stop, stride);
     let mut n = 0;
     for (k, (mine, theirs)) in here.iter().zip(gathered).enumerate() {
         let Some(theirs) = theirs else { continue };

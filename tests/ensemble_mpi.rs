@@ -180,6 +180,38 @@ fn two_ranks_equal_one_process_and_keep_the_failures() {
     }
 }
 
+/// Particle runs over two ranks: boxes of rigid water, every gathered
+/// member equal to the one-process run_ensemble bit for bit, the NaN
+/// momentum failing at step 0 and the collapsed molecule at its first bond
+/// in step 1 (its start state kept), the other members complete.
+#[test]
+fn water_boxes_on_two_ranks_equal_one_process_and_keep_the_failures() {
+    let Some(open_mpi) = mpirun() else { return };
+    let exe = example();
+    let args = "--system water --waters 20 --members 12 --steps 50 --stride 10 \
+                --fail 3,8 --batch 4 --threads 2 --check";
+    let args: Vec<&str> = args.split_whitespace().collect();
+    let out = launch(open_mpi, &exe, 2, &args);
+    assert!(out.status.success(), "exit status {:?}", out.status);
+    let text = stdout(&out);
+    assert!(
+        text.contains("check ok: 12 gathered members bit-identical"),
+        "{text}"
+    );
+    assert!(text
+        .contains("member 3 failed as injected: non-finite value in the initial state at step 0"));
+    assert!(
+        text.contains("member 8 failed as injected")
+            && text.contains("(partial trajectory: 1 states)"),
+        "{text}"
+    );
+    let last = text.lines().last().unwrap();
+    assert!(
+        last.starts_with("ensemble members=12 ok=10 failed=2 ranks=2 threads=2"),
+        "{last}"
+    );
+}
+
 /// An interrupted job resumed: the first job stops after 3 batches of 8 (a
 /// wall-time limit) and its files are then torn as by a kill during a
 /// write (half a manifest line, stray words after the last record); the

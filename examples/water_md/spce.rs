@@ -75,6 +75,7 @@ const HALF_SHELL: [[isize; 3]; 13] = [
 /// kcal/mol and forces in kcal/mol/Å from [`energy_forces`](Self::energy_forces);
 /// as a [`ForceField`] in the integrator's units, g/mol·Å²/fs²
 /// (1 kcal/mol = 1/`MVV2E` of them).
+#[derive(Clone)]
 pub struct Spce {
     box_len: [f64; 3],
     cutoff: f64,

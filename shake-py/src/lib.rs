@@ -483,7 +483,6 @@ fn integrator<S: ConstrainedSystem, B: BaseMap>(s: S, base: B, plan: &Plan) -> I
 
 /// Runs every initial state (rows of `z0s`) on all cores.
 fn run_all(model: &Model, base: &str, plan: &Plan, z0s: &[Vec<f64>]) -> Vec<RunOutcome> {
-    use geoshake::rayon::prelude::*;
     macro_rules! go {
         ($b:expr) => {
             with_model!(model, s => {
@@ -491,9 +490,7 @@ fn run_all(model: &Model, base: &str, plan: &Plan, z0s: &[Vec<f64>]) -> Vec<RunO
                 if z0s.len() == 1 {
                     vec![run_one(&mut template.clone(), plan, &z0s[0])]
                 } else {
-                    z0s.par_iter()
-                        .map_init(|| template.clone(), |integ, z0| run_one(integ, plan, z0))
-                        .collect()
+                    geoshake::ensemble(&template, z0s, |integ, _, z0| run_one(integ, plan, z0))
                 }
             })
         };

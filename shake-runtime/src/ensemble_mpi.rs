@@ -10,10 +10,13 @@
 //!   neighbouring index, often of similar cost, are spread over the ranks),
 //!   and each rank runs its share with rayon on its own threads.
 //! - **Determinism.** Every member is computed by the same code as in
-//!   `run_ensemble`: a clone of the template integrator runs it from its
-//!   initial state (each run resets the integrator's carried state), so its
-//!   outcome is bit for bit the same whatever the number of ranks, threads
-//!   or the batch it fell into.
+//!   `run_ensemble`: a clone of the template runs it from its initial state
+//!   ([`Template::run_member`]: a dense [`Integrator`](crate::Integrator)
+//!   from a [`State`](crate::State), a particle
+//!   [`Rattle`](crate::particles::Rattle) from a
+//!   [`ParticleState`](crate::particles::ParticleState), each run
+//!   independent of the runs before it), so its outcome is bit for bit the
+//!   same whatever the number of ranks, threads or the batch it fell into.
 //! - **Gather.** Each rank packs its outcomes
 //!   ([`pack_outcome`]: u64 words, floats as
 //!   their bits, the error with its step and time, the partial trajectory of
@@ -49,16 +52,12 @@
 //! }
 //! ```
 
-use crate::base_map::BaseMap;
-use crate::ensemble::{pack_outcome, unpack_outcome, RecordError};
+use crate::ensemble::{ensemble, pack_outcome, unpack_outcome, RecordError, Template};
 use crate::ensemble_store::{EnsembleStore, StoreError};
-use crate::integrator::{Integrator, RunOutcome, Stop};
-use crate::state::State;
-use crate::system::ConstrainedSystem;
+use crate::integrator::{RunOutcome, Stop};
 use mpi::datatype::PartitionMut;
 use mpi::traits::{Communicator, CommunicatorCollectives, Root};
 use mpi::Count;
-use rayon::prelude::*;
 use std::fmt;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -241,18 +240,17 @@ pub enum MpiEnsembleError {
 /// let r = run_ensemble_mpi(&universe.world(), &rattle, &starts, Stop::Steps(100), 100,
 ///     &MpiEnsemble::default()).unwrap();
 /// ```
-pub fn run_ensemble_mpi<C, S, B>(
+pub fn run_ensemble_mpi<C, T>(
     comm: &C,
-    template: &Integrator<S, B>,
-    initial: &[State],
+    template: &T,
+    initial: &[T::Start],
     stop: Stop,
     stride: u64,
     options: &MpiEnsemble,
 ) -> Result<Option<MpiEnsembleResults>, MpiEnsembleError>
 where
     C: Communicator + CommunicatorCollectives,
-    S: ConstrainedSystem + Clone + Sync,
-    B: BaseMap,
+    T: Template,
 {
     if options.batch == 0 {
         return Err(MpiEnsembleError::InvalidOption("batch must be at least 1"));
@@ -329,18 +327,12 @@ where
             .step_by(ranks)
             .map(|&k| k as usize)
             .collect();
-        let packed: Vec<Vec<u64>> = mine
-            .par_iter()
-            .map_init(
-                || template.clone(),
-                |integ, &k| {
-                    let out = integ.run(initial[k].clone(), stop).stride(stride).execute();
-                    let mut words = Vec::new();
-                    pack_outcome(k, &out, &mut words);
-                    words
-                },
-            )
-            .collect();
+        let packed: Vec<Vec<u64>> = ensemble(template, &mine, |copy, _, &k| {
+            let out = copy.run_member(&initial[k], stop, stride);
+            let mut words = Vec::new();
+            pack_outcome(k, &out, &mut words);
+            words
+        });
         let words = packed.concat();
         // Every rank learns every count, so all agree on whether the batch
         // fits one gather.

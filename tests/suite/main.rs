@@ -42,6 +42,7 @@ mod paper_hopf;
 mod particles_adjust;
 mod particles_alloc;
 mod particles_driver;
+mod particles_ensemble;
 mod particles_errors;
 mod particles_forces;
 mod particles_io;

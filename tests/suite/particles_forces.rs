@@ -15,7 +15,7 @@ use geoshake_testkit::same_bits::assert_same_bits;
 
 /// The springs of a family, evaluated by hand as a user's force field
 /// would: the same stencil, member after member, forces subtracted.
-fn springs_by_hand(table: Table, calls: Arc<AtomicUsize>) -> impl ForceField {
+fn springs_by_hand(table: Table, calls: Arc<AtomicUsize>) -> impl ForceField + Clone + Sync {
     move |q: &[f64], f: &mut [f64]| {
         calls.fetch_add(1, Ordering::Relaxed);
         let mut v = 0.0;
@@ -137,7 +137,7 @@ fn h_is_conserved_to_second_order_with_brought_forces() {
 }
 
 /// A force field that returns NaN at one coordinate on its `bad`-th call.
-fn poisoned(bad: usize, calls: Arc<AtomicUsize>) -> impl ForceField {
+fn poisoned(bad: usize, calls: Arc<AtomicUsize>) -> impl ForceField + Clone + Sync {
     move |q: &[f64], f: &mut [f64]| {
         let n = calls.fetch_add(1, Ordering::Relaxed) + 1;
         for (f, q) in f.iter_mut().zip(q) {

@@ -33,6 +33,29 @@ fn a_member_does_not_depend_on_its_predecessors() {
     }
 }
 
+/// A particle member that fails at its start stores no state, yet its
+/// record names the system's d and m, larger than the record itself: it
+/// reads back whole, as does a member that ran.
+#[test]
+fn a_large_system_without_stored_states_reads_back() {
+    use crate::particles::{generate, Options, Rattle};
+    let (system, mut state) = generate::water(20, 1).unwrap();
+    let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
+    rattle.project(&mut state).unwrap();
+    generate::set_temperature(rattle.system(), &mut state, 300.0);
+    let mut broken = state.clone();
+    broken.p_mut()[0] = f64::NAN;
+    for (z, stored) in [(broken, 0), (state, 6)] {
+        let out = rattle.run(&z, Stop::Steps(5)).execute();
+        assert_eq!(out.trajectory.len(), stored);
+        let words = bits(3, &out);
+        assert_eq!(words.len() < 180, stored == 0);
+        let (k, back, used) = unpack_outcome(&words).unwrap();
+        assert_eq!((k, used), (3, words.len()));
+        assert_eq!(bits(3, &back), words);
+    }
+}
+
 /// Every error variant reads back as itself, after the trajectory and
 /// diagnostics; a truncated record is an error at every cut.
 #[test]

@@ -11,9 +11,14 @@
 /// at the new positions q1 (whose forces the next step's first kick
 /// reuses), and once more when a run starts from a state it did not make.
 /// `&mut self`: the field may keep what it likes between calls (cell
-/// lists, buffers), and needs only to be [`Send`].
+/// lists, buffers). [`ParticleSystem::with_forces`](super::ParticleSystem::with_forces)
+/// asks it to be `Clone` and `Sync` besides: a clone of the solver (one
+/// per thread of an [`ensemble`](crate::ensemble())) calls a copy of its
+/// own, so a field whose forces depend only on q gives every clone the
+/// same steps.
 ///
-/// Any closure `FnMut(&[f64], &mut [f64]) -> f64 + Send` is a force field.
+/// Any closure `FnMut(&[f64], &mut [f64]) -> f64 + Send` is a force field
+/// (and `Clone` and `Sync` when what it captures is).
 ///
 /// ```
 /// use geoshake_runtime::particles::{ForceField, ParticleSystem};

@@ -14,6 +14,7 @@ use crate::tolerance::roundoff_floor;
 
 /// The coupled path (chains, general graphs): one simplified Newton over
 /// every constraint with the factor of N(q0).
+#[derive(Clone)]
 pub(super) struct Global {
     pub(super) solver: SpdSolver,
     /// Assembly of N from gradients: entry `pos[e]` gains

@@ -31,6 +31,7 @@ pub(super) fn particle_report() -> StepInfo {
 static STAMPS: AtomicU64 = AtomicU64::new(1);
 
 /// The solver proper.
+#[derive(Clone)]
 enum Path {
     Clusters {
         plans: Vec<FamilyClusters>,
@@ -104,6 +105,54 @@ pub struct Rattle {
     /// The state with this stamp was made by a RATTLE or SHAKE step whose
     /// multipliers ν are still held, its start positions in `qn`.
     multipliers_stamp: u64,
+}
+
+/// A solver that takes the same steps as this one, bit for bit, with
+/// workspaces and caches of its own: the system's families and masses and
+/// the coupled path's symbolic factorisation are shared, not copied, and
+/// the brought forces are a copy ([`ParticleSystem::with_forces`]). This
+/// is what an [`ensemble`](crate::ensemble()) gives each thread.
+///
+/// ```
+/// use geoshake_runtime::particles::{generate, Options, Rattle};
+/// let (system, mut state) = generate::water(8, 1).unwrap();
+/// let mut rattle = Rattle::new(system, 2.0, Options::default()).unwrap();
+/// rattle.project(&mut state).unwrap();
+/// generate::set_temperature(rattle.system(), &mut state, 300.0);
+/// let (mut a, mut b) = (state.clone(), state);
+/// let mut twin = rattle.clone();
+/// for _ in 0..10 {
+///     rattle.step(&mut a).unwrap();
+///     twin.step(&mut b).unwrap();
+/// }
+/// assert_eq!((a.q(), a.p()), (b.q(), b.p()));
+/// ```
+impl Clone for Rattle {
+    fn clone(&self) -> Self {
+        Rattle {
+            system: self.system.share(),
+            h: self.h,
+            options: self.options,
+            num: self.num.clone(),
+            path: self.path.clone(),
+            qn: self.qn.clone(),
+            pn: self.pn.clone(),
+            force: self.force.clone(),
+            has_potential: self.has_potential,
+            force_stamp: self.force_stamp,
+            potential: self.potential,
+            stamp: self.stamp,
+            run_t0: self.run_t0,
+            run_stamp: self.run_stamp,
+            start_stamp: self.start_stamp,
+            start_step: self.start_step,
+            run_step0: self.run_step0,
+            step_offset: self.step_offset,
+            thermostat: self.thermostat,
+            q0: self.q0.clone(),
+            multipliers_stamp: self.multipliers_stamp,
+        }
+    }
 }
 
 impl Rattle {
@@ -338,6 +387,13 @@ impl Rattle {
         self.run_t0 = t0;
         self.run_stamp = std::mem::take(&mut self.start_stamp);
         self.run_step0 = std::mem::take(&mut self.start_step);
+    }
+
+    /// Makes no state count as the last one this solver made: the next
+    /// step or run starts from its state as from a new one (the caches
+    /// are recomputed, not reused).
+    pub(crate) fn forget_last_state(&mut self) {
+        self.stamp = 0;
     }
 
     /// The stamp of the state the last successful step made (0 when the

@@ -3,6 +3,7 @@
 use super::plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 use super::stencil::member_scale;
 use super::{ForceField, Stencil, Table, TopologyError};
+use std::sync::Arc;
 
 /// A constraint family as the solvers see it: the rows of a [`Table`]
 /// evaluated through one [`Stencil`]. Constraint k of the family is
@@ -406,12 +407,35 @@ impl<S: Stencil> PotentialFamily for Family<S> {
 /// assert_eq!((dimer.particles(), dimer.constraints()), (2, 1));
 /// ```
 pub struct ParticleSystem {
+    /// Everything but the brought forces, shared by the clones of a
+    /// [`Rattle`](super::Rattle) (the threads of an ensemble): read-only
+    /// once the system is built.
+    parts: Arc<Parts>,
+    /// The brought forces: each clone has its own copy, since a field may
+    /// keep buffers it writes between calls.
+    external: Option<Box<dyn Field>>,
+}
+
+/// The read-only part of a [`ParticleSystem`].
+struct Parts {
     dim: usize,
     masses: Vec<f64>,
     inverse_masses: Vec<f64>,
     constraints: Vec<Box<dyn ConstraintFamily>>,
     potentials: Vec<Box<dyn PotentialFamily>>,
-    external: Option<Box<dyn ForceField>>,
+}
+
+/// A brought force field as the system stores it: one that can be copied
+/// for another clone of the solver, and shared by reference with the
+/// threads that copy it.
+trait Field: ForceField + Sync {
+    fn clone_box(&self) -> Box<dyn Field>;
+}
+
+impl<F: ForceField + Clone + Sync + 'static> Field for F {
+    fn clone_box(&self) -> Box<dyn Field> {
+        Box::new(self.clone())
+    }
 }
 
 impl ParticleSystem {
@@ -431,14 +455,33 @@ impl ParticleSystem {
             });
         }
         let inverse_masses = masses.iter().map(|m| 1.0 / m).collect();
-        Ok(ParticleSystem {
+        let parts = Parts {
             dim,
             masses,
             inverse_masses,
             constraints: Vec::new(),
             potentials: Vec::new(),
+        };
+        Ok(ParticleSystem {
+            parts: Arc::new(parts),
             external: None,
         })
+    }
+
+    /// The system for another clone of a solver: the same families and
+    /// masses, shared, and a copy of the brought forces.
+    pub(crate) fn share(&self) -> ParticleSystem {
+        ParticleSystem {
+            parts: Arc::clone(&self.parts),
+            external: self.external.as_ref().map(|f| f.clone_box()),
+        }
+    }
+
+    /// The parts, to add a family to.
+    fn parts_mut(&mut self) -> &mut Parts {
+        // A system is shared only inside a solver, which never hands it
+        // out by value: a system being built is its parts' only owner.
+        Arc::get_mut(&mut self.parts).expect("a system being built is not shared")
     }
 
     /// Adds a constraint family: `stencil` applied to every row of `table`.
@@ -451,7 +494,7 @@ impl ParticleSystem {
         table: Table,
     ) -> Result<Self, TopologyError> {
         let family = self.family(name, stencil, table, true)?;
-        self.constraints.push(Box::new(family));
+        self.parts_mut().constraints.push(Box::new(family));
         Ok(self)
     }
 
@@ -463,13 +506,16 @@ impl ParticleSystem {
         table: Table,
     ) -> Result<Self, TopologyError> {
         let family = self.family(name, stencil, table, false)?;
-        self.potentials.push(Box::new(family));
+        self.parts_mut().potentials.push(Box::new(family));
         Ok(self)
     }
 
     /// Adds the forces of an external potential V_ext, evaluated by the
-    /// user's code ([`ForceField`]); replaces one given before.
-    pub fn with_forces(mut self, field: impl ForceField + 'static) -> Self {
+    /// user's code ([`ForceField`]); replaces one given before. The field
+    /// is `Clone` and `Sync` so that a solver can be cloned (one clone per
+    /// thread of an [`ensemble`](crate::ensemble())): each clone calls its
+    /// own copy.
+    pub fn with_forces(mut self, field: impl ForceField + Clone + Sync + 'static) -> Self {
         self.external = Some(Box::new(field));
         self
     }
@@ -483,11 +529,11 @@ impl ParticleSystem {
         unique: bool,
     ) -> Result<Family<S>, TopologyError> {
         let family = || name.to_string();
-        if S::DIM != self.dim {
+        if S::DIM != self.parts.dim {
             return Err(TopologyError::Dimension {
                 family: family(),
                 stencil: S::DIM,
-                system: self.dim,
+                system: self.parts.dim,
             });
         }
         let shape = |what, got, expected| TopologyError::RowShape {
@@ -541,43 +587,43 @@ impl ParticleSystem {
             name: name.to_string(),
             stencil,
             table,
-            dim: self.dim,
+            dim: self.parts.dim,
         })
     }
 
     /// The dimension D of each particle's position.
     pub fn dim(&self) -> usize {
-        self.dim
+        self.parts.dim
     }
 
     /// The number n of particles (d = n·D degrees of freedom).
     pub fn particles(&self) -> usize {
-        self.masses.len()
+        self.parts.masses.len()
     }
 
     /// The masses m_a.
     pub fn masses(&self) -> &[f64] {
-        &self.masses
+        &self.parts.masses
     }
 
     /// 1/m_a.
     pub fn inverse_masses(&self) -> &[f64] {
-        &self.inverse_masses
+        &self.parts.inverse_masses
     }
 
     /// The number m of constraints, all families together.
     pub fn constraints(&self) -> usize {
-        self.constraints.iter().map(|f| f.table().len()).sum()
+        self.parts.constraints.iter().map(|f| f.table().len()).sum()
     }
 
     /// The constraint families, in the order they were added.
     pub fn constraint_families(&self) -> &[Box<dyn ConstraintFamily>] {
-        &self.constraints
+        &self.parts.constraints
     }
 
     /// The potential families, in the order they were added.
     pub fn potential_families(&self) -> &[Box<dyn PotentialFamily>] {
-        &self.potentials
+        &self.parts.potentials
     }
 
     /// True when forces were brought with [`with_forces`](Self::with_forces).
@@ -587,7 +633,7 @@ impl ParticleSystem {
 
     /// True when H has a potential: a potential family or brought forces.
     pub fn has_potential(&self) -> bool {
-        !self.potentials.is_empty() || self.external.is_some()
+        !self.parts.potentials.is_empty() || self.external.is_some()
     }
 
     /// The kinetic energy Σ_a |p_a|²/(2 m_a) of momenta `p` (n·D entries).
@@ -598,9 +644,9 @@ impl ParticleSystem {
     /// assert_eq!(s.kinetic_energy(&[1.0, 0.0, 0.0, 2.0]), 0.5 + 0.5);
     /// ```
     pub fn kinetic_energy(&self, p: &[f64]) -> f64 {
-        let d = self.dim;
+        let d = self.parts.dim;
         let mut two_k = 0.0;
-        for (a, w) in self.inverse_masses.iter().enumerate() {
+        for (a, w) in self.parts.inverse_masses.iter().enumerate() {
             two_k += w * p[a * d..(a + 1) * d].iter().map(|p| p * p).sum::<f64>();
         }
         0.5 * two_k
@@ -618,7 +664,7 @@ impl ParticleSystem {
                 *g = -*g;
             }
         }
-        for f in &self.potentials {
+        for f in &self.parts.potentials {
             v += f.energy_gradient(q, grad);
         }
         v

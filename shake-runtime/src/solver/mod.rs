@@ -38,7 +38,7 @@ pub use band::BandCholesky;
 pub use sparse::SparseCholesky;
 
 /// A symmetric positive definite solver chosen from the pattern.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub enum SpdSolver {
     /// Cholesky within a band.
     Band(BandCholesky),

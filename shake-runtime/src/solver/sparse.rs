@@ -15,6 +15,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side};
+use std::sync::Arc;
 
 /// N = L Lᵀ for a symmetric positive definite N with an arbitrary pattern.
 /// The lower triangle of N is stored by columns (CSC).
@@ -38,11 +39,33 @@ use faer::{Conj, MatMut, Par, Side};
 /// ```
 pub struct SparseCholesky {
     n: usize,
-    pattern: SymbolicSparseColMat<usize>,
+    /// The symbolic phase, which no numeric call changes: clones share it.
+    analysis: Arc<Analysis>,
     values: Vec<f64>,
-    symbolic: SymbolicCholesky<usize>,
     factor: Vec<f64>,
     stack: MemBuffer,
+}
+
+/// N's pattern and its symbolic factorisation (ordering, elimination tree)
+/// with the scratch the numeric calls need.
+struct Analysis {
+    pattern: SymbolicSparseColMat<usize>,
+    symbolic: SymbolicCholesky<usize>,
+    scratch: StackReq,
+}
+
+/// Shares the symbolic phase; copies the values and the factor, and gives
+/// the copy scratch of its own.
+impl Clone for SparseCholesky {
+    fn clone(&self) -> Self {
+        SparseCholesky {
+            n: self.n,
+            analysis: Arc::clone(&self.analysis),
+            values: self.values.clone(),
+            factor: self.factor.clone(),
+            stack: MemBuffer::new(self.analysis.scratch),
+        }
+    }
 }
 
 impl std::fmt::Debug for SparseCholesky {
@@ -87,11 +110,15 @@ impl SparseCholesky {
         ]);
         let stack = MemBuffer::try_new(req).map_err(|e| format!("{e:?}"))?;
         let factor = vec![0.0; symbolic.len_val()];
+        let analysis = Analysis {
+            pattern,
+            symbolic,
+            scratch: req,
+        };
         Ok(SparseCholesky {
             n,
             values: vec![0.0; entries.len()],
-            pattern,
-            symbolic,
+            analysis: Arc::new(analysis),
             factor,
             stack,
         })
@@ -99,7 +126,7 @@ impl SparseCholesky {
 
     /// Where N_ij (i ≥ j, in the pattern) is stored: column j, row i.
     pub fn position(&self, i: usize, j: usize) -> usize {
-        let p = self.pattern.as_ref();
+        let p = self.analysis.pattern.as_ref();
         let start = p.col_ptr()[j];
         let rows = &p.row_idx()[start..p.col_ptr()[j + 1]];
         start
@@ -115,9 +142,10 @@ impl SparseCholesky {
 
     /// The numeric factorisation.
     pub fn factor(&mut self) -> Result<(), usize> {
-        let a = SparseColMatRef::new(self.pattern.as_ref(), &self.values);
+        let a = SparseColMatRef::new(self.analysis.pattern.as_ref(), &self.values);
         let stack = MemStack::new(&mut self.stack);
-        self.symbolic
+        self.analysis
+            .symbolic
             .factorize_numeric_llt(
                 &mut self.factor,
                 a,
@@ -137,7 +165,7 @@ impl SparseCholesky {
 
     /// b ← N⁻¹ b.
     pub fn solve(&mut self, b: &mut [f64]) {
-        let llt = LltRef::new(&self.symbolic, &self.factor);
+        let llt = LltRef::new(&self.analysis.symbolic, &self.factor);
         let rhs = MatMut::from_column_major_slice_mut(b, self.n, 1);
         llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.stack));
     }
@@ -145,7 +173,7 @@ impl SparseCholesky {
     /// Bytes held: pattern, values, factor (an estimate of faer's symbolic
     /// structure as 2 indices per row and per factor entry), scratch.
     pub fn bytes(&self) -> usize {
-        let p = self.pattern.as_ref();
+        let p = self.analysis.pattern.as_ref();
         (p.col_ptr().len() + p.row_idx().len()) * 8
             + self.values.capacity() * 8
             + self.factor.capacity() * 8

@@ -160,7 +160,7 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
         words: &words[..len],
         at: r.at,
     };
-    let d = r.count("dof")?;
+    let d = r.index("dof")?;
     let n = r.count("stored states")?;
     let n_diag = r.count("diagnostics")?;
     if n_diag != 0 && n_diag != n {
@@ -169,7 +169,18 @@ pub fn unpack_outcome(words: &[u64]) -> Result<(usize, RunOutcome, usize), Recor
             value: n_diag as u64,
         });
     }
-    let m = r.count("constraints")?;
+    let m = r.index("constraints")?;
+    // d and m are the system's, kept when no state or multiplier is stored
+    // (a member that failed at its start): each is bounded by the words
+    // its 2d (2m) numbers take only when the record holds some.
+    for (what, size, held) in [("dof", d, n), ("constraints", m, n_diag)] {
+        if held > 0 && size.checked_mul(2).is_none_or(|w| w > len) {
+            return Err(RecordError::Corrupted {
+                what,
+                value: size as u64,
+            });
+        }
+    }
     let t0 = f64::from_bits(r.word()?);
     let h = f64::from_bits(r.word()?);
     let stride = r.word()?;
