@@ -12,10 +12,14 @@
 //! [`Integrator`](crate::Integrator) runs it unchanged.
 //!
 //! Particle systems (`particles x[D];`, families over run-time tables) are
-//! declared the same way by [`DeclaredParticles`]: each family's template
-//! becomes a tape evaluating its value and gradient, and the system is a
+//! declared the same way by `DeclaredParticles`, with the feature
+//! `declared-particles`: each family's template becomes a tape evaluating
+//! its value and gradient, and the system is a
 //! [`ParticleSystem`](crate::runtime::particles::ParticleSystem) that
-//! [`particles::Rattle`](crate::runtime::particles::Rattle) runs.
+//! [`particles::Rattle`](crate::runtime::particles::Rattle) runs. The
+//! feature is off by default because it compiles the particle kernels
+//! once for each shape a run-time family may have (eight), which made the
+//! facade the slowest crate of a build; the Python package turns it on.
 //!
 //! ```
 //! use geoshake::declared::DeclaredSystem;
@@ -41,9 +45,16 @@ use crate::runtime::{ClosedForm, ConstrainedSystem, ConstraintKind, Hamiltonian}
 use geoshake_symbolic::diff::Kind;
 use geoshake_symbolic::tape::Program;
 pub use geoshake_symbolic::DeclError;
+#[cfg(feature = "declared-particles")]
 pub use particles::{DeclaredParticles, FamilyKind, FamilyShape};
 
+#[cfg(feature = "declared-particles")]
 mod particles;
+
+/// The most particles a member of a run-time family may touch.
+const MAX_ARITY: usize = 4;
+/// The most numbers a row of a run-time family's table may hold.
+const MAX_DATA: usize = 4;
 
 /// Why a run-time declaration was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -73,14 +84,14 @@ pub enum DeclareError {
         name: String,
     },
     /// A particle family whose shape (particles per member, dimension) has
-    /// no run-time stencil: see [`DeclaredParticles`] for the shapes there
+    /// no run-time stencil: see `DeclaredParticles` for the shapes there
     /// are.
     #[error(
         "family `{family}`: members of {arity} particles in R^{dim} have no run-time stencil \
          (there are 1 to {max_arity} particles in R^2 or R^3, with at most {max_data} numbers \
          per row); declare this system with `constrained_system!`",
-        max_arity = particles::MAX_ARITY,
-        max_data = particles::MAX_DATA
+        max_arity = MAX_ARITY,
+        max_data = MAX_DATA
     )]
     Shape {
         /// The family.
@@ -92,7 +103,7 @@ pub enum DeclareError {
         /// Its numbers per row.
         data: usize,
     },
-    /// [`DeclaredParticles::system`] was given another number of tables
+    /// `DeclaredParticles::system` was given another number of tables
     /// than the declaration has families.
     #[error("{got} tables given, the declaration has {expected} families ({tables})")]
     Tables {

@@ -12,16 +12,10 @@
 //! width does not multiply the instantiations. Other shapes are refused
 //! with [`DeclareError::Shape`].
 
-use super::{parameter_values, DeclareError};
+use super::{parameter_values, DeclareError, MAX_ARITY, MAX_DATA};
 use crate::runtime::particles::{ParticleSystem, Stencil, Table, TopologyError};
 use geoshake_symbolic::tape;
 pub use geoshake_symbolic::{parse_topology::FamilyKind, FamilyShape};
-
-/// The most particles a member of a run-time family may touch.
-pub(super) const MAX_ARITY: usize = 4;
-
-/// The most numbers a row of a run-time family's table may hold.
-pub(super) const MAX_DATA: usize = 4;
 
 /// A particle system declared from a string in the grammar of
 /// [`constrained_system!`](crate::constrained_system) (`particles x[D];`
