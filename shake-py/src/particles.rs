@@ -307,6 +307,9 @@ impl ParticleRun {
     }
 }
 
+/// Positions and momenta, each of shape (n, D).
+type Pair<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
+
 #[pymethods]
 impl ParticleRattle {
     /// Brings (q, p) onto M (every constraint holds) and then onto M^H
@@ -316,7 +319,7 @@ impl ParticleRattle {
         py: Python<'py>,
         q: &Bound<'py, PyAny>,
         p: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+    ) -> PyResult<Pair<'py>> {
         let mut state = self.state(q, p)?;
         let mut rattle = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
         let r: &mut Rattle = &mut rattle;
@@ -332,7 +335,7 @@ impl ParticleRattle {
         py: Python<'py>,
         q: &Bound<'py, PyAny>,
         p: &Bound<'py, PyAny>,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+    ) -> PyResult<Pair<'py>> {
         let mut state = self.state(q, p)?;
         let mut rattle = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
         let r: &mut Rattle = &mut rattle;
@@ -436,11 +439,7 @@ impl ParticleRattle {
         ))
     }
 
-    fn pair<'py>(
-        &self,
-        py: Python<'py>,
-        state: &ParticleState,
-    ) -> (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>) {
+    fn pair<'py>(&self, py: Python<'py>, state: &ParticleState) -> Pair<'py> {
         let shape = (self.particles, self.dim);
         let q = Array2::from_shape_vec(shape, state.q().to_vec()).expect("n·D positions");
         let p = Array2::from_shape_vec(shape, state.p().to_vec()).expect("n·D momenta");
