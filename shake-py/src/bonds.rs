@@ -26,7 +26,7 @@ pub(crate) struct Bonds {
     constraints: usize,
 }
 
-fn topology(e: TopologyError) -> PyErr {
+pub(crate) fn topology(e: TopologyError) -> PyErr {
     InvalidInputError::new_err(e.to_string())
 }
 
@@ -248,7 +248,7 @@ impl Bonds {
 
 /// A solver error as the package's exception, with the bond at fault
 /// (`member`, the row of `pairs`) when there is one.
-fn error(py: Python<'_>, e: &StepError) -> PyErr {
+pub(crate) fn error(py: Python<'_>, e: &StepError) -> PyErr {
     let err = typed_error(py, e);
     let member = match e {
         StepError::AtMember { member, .. } => Some(*member),

@@ -6,6 +6,7 @@
 
 mod bonds;
 mod models;
+mod particles;
 mod sampler;
 
 use geoshake::declared::{DeclareError, DeclaredSystem};
@@ -220,24 +221,9 @@ impl System {
 #[pyfunction]
 #[pyo3(signature = (source, **parameters))]
 fn declare(source: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<System> {
-    let mut given: Vec<(String, f64)> = Vec::new();
-    if let Some(ps) = parameters {
-        for (k, v) in ps.iter() {
-            given.push((k.extract()?, v.extract()?));
-        }
-    }
+    let given = keyword_parameters(parameters)?;
     let refs: Vec<(&str, f64)> = given.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-    let sys = DeclaredSystem::new(source, &refs).map_err(|e| match e {
-        DeclareError::Declaration(d) => Python::attach(|py| {
-            let err = DeclarationError::new_err(d.to_string());
-            let v = err.value(py);
-            let _ = v.setattr("message", d.message.clone());
-            let _ = v.setattr("line", d.line);
-            let _ = v.setattr("column", d.column);
-            err
-        }),
-        e => ParameterError::new_err(e.to_string()),
-    })?;
+    let sys = DeclaredSystem::new(source, &refs).map_err(declare_error)?;
     let parameters = sys
         .parameter_names()
         .iter()
@@ -248,6 +234,55 @@ fn declare(source: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<Sys
         name: sys.name().to_string(),
         parameters,
         model: Model::Declared(sys),
+    })
+}
+
+/// The parameters given by keyword, as (name, value) pairs.
+fn keyword_parameters(parameters: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, f64)>> {
+    let mut given = Vec::new();
+    if let Some(ps) = parameters {
+        for (k, v) in ps.iter() {
+            given.push((k.extract()?, v.extract()?));
+        }
+    }
+    Ok(given)
+}
+
+/// A refused run-time declaration (dense or particles) as the package's
+/// exception: the declaration itself is `DeclarationError` with `message`,
+/// `line` and `column` (both None for a family shape the runtime has no
+/// stencil for: the shape, not a token, is at fault), parameters are
+/// `ParameterError`, and the tables and masses of a particle system are
+/// `InvalidInputError`.
+pub(crate) fn declare_error(e: DeclareError) -> PyErr {
+    Python::attach(|py| {
+        let (err, message, position) = match &e {
+            DeclareError::Declaration(d) => (
+                DeclarationError::new_err(d.to_string()),
+                Some(d.message.clone()),
+                Some((d.line, d.column)),
+            ),
+            DeclareError::Shape { .. } => (
+                DeclarationError::new_err(e.to_string()),
+                Some(e.to_string()),
+                None,
+            ),
+            DeclareError::UnknownParameter { .. }
+            | DeclareError::MissingParameter { .. }
+            | DeclareError::DuplicateParameter { .. } => {
+                (ParameterError::new_err(e.to_string()), None, None)
+            }
+            DeclareError::Tables { .. } | DeclareError::Topology(_) => {
+                (InvalidInputError::new_err(e.to_string()), None, None)
+            }
+        };
+        if let Some(message) = message {
+            let v = err.value(py);
+            let _ = v.setattr("message", message);
+            let _ = v.setattr("line", position.map(|p| p.0));
+            let _ = v.setattr("column", position.map(|p| p.1));
+        }
+        err
     })
 }
 
@@ -755,7 +790,11 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<System>()?;
     m.add_class::<Result_>()?;
     m.add_class::<bonds::Bonds>()?;
+    m.add_class::<particles::DeclaredParticles>()?;
+    m.add_class::<particles::ParticleRattle>()?;
+    m.add_class::<particles::ParticleRun>()?;
     m.add_function(wrap_pyfunction!(declare, m)?)?;
+    m.add_function(wrap_pyfunction!(particles::declare_particles, m)?)?;
     m.add_function(wrap_pyfunction!(model, m)?)?;
     m.add_function(wrap_pyfunction!(model_names, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;

@@ -23,6 +23,10 @@ Constrained Hamiltonian Monte Carlo on M for a system H = |p|²/2 + U(q)
 with holonomic constraints: ``geoshake.sample(system, q0, chains=4,
 draws=1000)`` returns the draws as arrays of shape (chains, draws, d).
 
+Particle systems (molecular dynamics: constraint families over run-time
+tables) are declared with ``geoshake.declare_particles(source)`` and run on
+arrays of shape (n, D) by ``.system(masses, {table: rows}, h)``.
+
 Every failure is a subclass of :class:`ShakeError`; a failed run's error
 carries ``step``, ``time``, ``residual`` and the partial trajectory.
 """
@@ -31,6 +35,7 @@ from ._geoshake import (
     Bonds,
     ComponentJumpError,
     DeclarationError,
+    DeclaredParticles,
     FibreJumpError,
     InvalidInputError,
     NewtonError,
@@ -38,10 +43,13 @@ from ._geoshake import (
     NonFiniteError,
     NotOnConstraintError,
     ParameterError,
+    ParticleRattle,
+    ParticleRun,
     Result,
     ShakeError,
     System,
     declare,
+    declare_particles,
     ensemble,
     ess_bulk,
     rhat,
@@ -54,6 +62,7 @@ __all__ = [
     "Bonds",
     "ComponentJumpError",
     "DeclarationError",
+    "DeclaredParticles",
     "FibreJumpError",
     "InvalidInputError",
     "NewtonError",
@@ -61,10 +70,13 @@ __all__ = [
     "NonFiniteError",
     "NotOnConstraintError",
     "ParameterError",
+    "ParticleRattle",
+    "ParticleRun",
     "Result",
     "ShakeError",
     "System",
     "declare",
+    "declare_particles",
     "ensemble",
     "ess_bulk",
     "models",

@@ -1,6 +1,6 @@
 """Type stubs of the Rust extension ``geoshake._geoshake``."""
 
-from typing import Any, Literal, Optional, Union
+from typing import Any, Literal, Optional, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -22,11 +22,12 @@ class ShakeError(Exception):
     sigma: npt.NDArray[np.float64]
 
 class DeclarationError(ShakeError):
-    """A declaration refused, with the macro's message and its position."""
+    """A declaration refused, with the macro's message and its position
+    (None for a particle family of a shape the runtime has no stencil for)."""
 
     message: str
-    line: int
-    column: int
+    line: Optional[int]
+    column: Optional[int]
 
 class ParameterError(ShakeError): ...
 class InvalidInputError(ShakeError): ...
@@ -93,7 +94,79 @@ class Bonds:
     def solver(self) -> Literal["clusters", "band", "sparse"]: ...
     def __len__(self) -> int: ...
 
+class FamilyInfo(TypedDict):
+    name: str
+    kind: Literal["constraint", "potential"]
+    table: str
+    arity: int
+    data: int
+
+class DeclaredParticles:
+    """A particle system declared from a string: its families and the
+    tables they read."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def dim(self) -> int: ...
+    @property
+    def parameters(self) -> dict[str, float]: ...
+    @property
+    def families(self) -> list[FamilyInfo]: ...
+    def system(
+        self,
+        masses: npt.ArrayLike,
+        tables: dict[str, npt.ArrayLike],
+        h: float,
+        *,
+        method: Method = "rattle",
+        tolerance: Optional[float] = None,
+        max_iterations: Optional[int] = None,
+    ) -> ParticleRattle: ...
+
+class ParticleRun:
+    """A particle run: q and p of shape (frames, n, D), time and step of
+    shape (frames,), and the error that ended it early (None if none)."""
+
+    q: npt.NDArray[np.float64]
+    p: npt.NDArray[np.float64]
+    time: npt.NDArray[np.float64]
+    step: npt.NDArray[np.uint64]
+    error: Optional[ShakeError]
+    def __len__(self) -> int: ...
+
+class ParticleRattle:
+    """RATTLE or SHAKE on a declared particle system, on (n, D) arrays."""
+
+    def project(
+        self, q: npt.ArrayLike, p: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    def step(
+        self, q: npt.ArrayLike, p: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    def run(
+        self,
+        q: npt.ArrayLike,
+        p: npt.ArrayLike,
+        steps: int,
+        *,
+        stride: int = 1,
+        t0: float = 0.0,
+    ) -> ParticleRun: ...
+    def kinetic_energy(self, p: npt.ArrayLike) -> float: ...
+    @property
+    def particles(self) -> int: ...
+    @property
+    def dim(self) -> int: ...
+    @property
+    def constraints(self) -> int: ...
+    @property
+    def h(self) -> float: ...
+    @property
+    def solver(self) -> Literal["clusters", "band", "sparse"]: ...
+
 def declare(source: str, **parameters: float) -> System: ...
+def declare_particles(source: str, **parameters: float) -> DeclaredParticles: ...
 def model(name: str, **parameters: float) -> System: ...
 def model_names() -> list[tuple[str, list[str]]]: ...
 def run(
