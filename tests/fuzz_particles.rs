@@ -1207,3 +1207,38 @@ fn fuzz_particles_base() -> Case {
         op: Op::Step(1),
     }
 }
+
+/// The long mode's one silent case (seed 13): three waters 10³⁶ long,
+/// g-BAOAB with h = 174, two steps ended Ok off M^H.
+#[test]
+fn far_waters_under_gbaoab_stay_on_the_hidden_constraint() {
+    let case = Case {
+        dim: 3,
+        shape: Shape::Waters(3),
+        corrupt: Corrupt::None,
+        scale: 1e36,
+        heavy: 11.069991475799686,
+        light: 1.1961177588703842,
+        h: 173.87024515336688,
+        options: Options {
+            tol: 4.129817275533618e-9,
+            max_iter: 50,
+            method: Method::Rattle,
+            solver: SolverChoice::Auto,
+        },
+        thermostat: Some(Thermostat {
+            gamma: 0.7157016263007963,
+            kt: 0.37846856651616984,
+            seed: 2665054945816401417,
+            substeps: 3,
+        }),
+        field: None,
+        momentum: 0.2995537186487692,
+        seed: 12191772520418331612,
+        start: Start::OnM,
+        project_first: false,
+        op: Op::Step(2),
+    };
+    let c = fuzz_cases(vec![case], run_case, DEADLINE);
+    assert_clean(&c);
+}
