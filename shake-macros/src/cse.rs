@@ -95,21 +95,6 @@ impl Coder<'_> {
         )
     }
 
-    /// The nodes the emitted expression of `id` refers to. A product writes
-    /// its negative powers as a denominator, so it refers to their bases.
-    fn deps(&self, id: NodeId) -> Vec<NodeId> {
-        match self.graph.node(id) {
-            Node::Mul(fs) => fs
-                .iter()
-                .map(|f| match self.graph.node(*f) {
-                    Node::Pow(b, n) if *n < 0 => *b,
-                    _ => *f,
-                })
-                .collect(),
-            n => n.children().to_vec(),
-        }
-    }
-
     /// A reference to the value of `id`: a leaf inline, else its `let`.
     pub fn atom(&self, id: NodeId) -> TokenStream {
         match self.graph.node(id) {
@@ -220,7 +205,7 @@ impl Coder<'_> {
                 Node::Var(v) if v.index() < self.dof => uses_q = true,
                 Node::Var(_) => uses_p = true,
                 Node::Lambda(_) => uses_lambda = true,
-                _ => stack.extend(self.deps(id)),
+                _ => stack.extend(self.graph.emitted_deps(id)),
             }
         }
         let defs: Vec<(TokenStream, TokenStream)> = needed

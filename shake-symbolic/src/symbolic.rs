@@ -150,6 +150,22 @@ impl Graph {
         &self.nodes[id.index()]
     }
 
+    /// The nodes the evaluation of `id` reads, as emitted code (the
+    /// macro's Rust, the tape) evaluates it: a product writes its negative
+    /// powers as a denominator, so it reads their bases.
+    pub fn emitted_deps(&self, id: NodeId) -> Vec<NodeId> {
+        match self.node(id) {
+            Node::Mul(fs) => fs
+                .iter()
+                .map(|f| match self.node(*f) {
+                    Node::Pow(b, n) if *n < 0 => *b,
+                    _ => *f,
+                })
+                .collect(),
+            n => n.children().to_vec(),
+        }
+    }
+
     /// The sorted state variables `id` depends on.
     pub fn support(&self, id: NodeId) -> &[VarId] {
         &self.support[id.index()]

@@ -211,27 +211,12 @@ impl Compiler<'_> {
         }
     }
 
-    /// The nodes a node's evaluation reads. A product reads the bases of its
-    /// negative powers (they go to the denominator), as the macro's code does.
-    fn deps(&self, id: NodeId) -> Vec<NodeId> {
-        match self.graph.node(id) {
-            Node::Mul(fs) => fs
-                .iter()
-                .map(|f| match self.graph.node(*f) {
-                    Node::Pow(b, n) if *n < 0 => *b,
-                    _ => *f,
-                })
-                .collect(),
-            n => n.children().to_vec(),
-        }
-    }
-
     fn tape(&mut self, entries: &[(usize, NodeId)]) -> Tape {
         let mut needed = BTreeSet::new();
         let mut stack: Vec<NodeId> = entries.iter().map(|e| e.1).collect();
         while let Some(id) = stack.pop() {
             if needed.insert(id) {
-                stack.extend(self.deps(id));
+                stack.extend(self.graph.emitted_deps(id));
             }
         }
         let mut em = Emitter {
