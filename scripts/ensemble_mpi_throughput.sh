@@ -19,7 +19,11 @@ for round in 1 2 3; do
     # alongside the wall-clock rate: under a shared machine's load the
     # former still gives the per-member cost.
     TIMEFORMAT='%U %S %R'
-    { time mpirun -n "$1" --oversubscribe "$exe" "${args[@]}" --threads "$2" "${extra[@]}" \
+    # Open MPI binds each rank to one core when there are at most two ranks:
+    # a rank's rayon threads would then share that core. `--bind-to none`
+    # lets them spread (a hybrid job on a cluster maps ranks with
+    # `--map-by ppr:1:node:pe=N` instead).
+    { time mpirun -n "$1" --oversubscribe --bind-to none "$exe" "${args[@]}" --threads "$2" "${extra[@]}" \
         | tail -1 > "$store/line"; } 2> "$store/time"
     read -r user sys wall < "$store/time"
     echo "round=$round ${3:-memory} $(cat "$store/line") cpu_s=$(awk "BEGIN{print $user + $sys}") wall_s=$wall"
