@@ -368,12 +368,18 @@ pub(crate) fn relative_dot_after(a: &[f64], b: &[f64], b0_sq: f64) -> f64 {
         aa += x * x;
         bb += y * y;
     }
+    relative_dot_from_sums(dot, aa, bb, b0_sq).unwrap_or_else(|| relative_dot_scaled(a, b))
+}
+
+/// [`relative_dot_after`] from the sums it forms (dot = a · b, aa = |a|²,
+/// bb = |b|², each accumulated in index order), so that a caller that
+/// forms b on the fly needs no copy of it: `None` where the squares are
+/// not safe and the scaled form must see the vectors themselves.
+#[inline(always)]
+pub(crate) fn relative_dot_from_sums(dot: f64, aa: f64, bb: f64, b0_sq: f64) -> Option<f64> {
     let bb = bb.max(b0_sq);
     let ab = aa * bb;
-    if aa > 1e-200 && bb > 1e-200 && ab < f64::INFINITY {
-        return dot.abs() / ab.sqrt();
-    }
-    relative_dot_scaled(a, b)
+    (aa > 1e-200 && bb > 1e-200 && ab < f64::INFINITY).then(|| dot.abs() / ab.sqrt())
 }
 
 /// [`relative_dot_after`] with both vectors scaled by their largest entry.

@@ -323,31 +323,54 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         for k in 0..self.table.len() {
             let gk = &grad[k * w..(k + 1) * w];
             let ik = &idx[k * ar..(k + 1) * ar];
-            let mut v = [0.0; MAX_LOCAL];
-            let mut s = 0.0;
+            // The velocities v = M⁻¹p of the member's particles are formed
+            // on the fly: a local copy of them (zeroed per member) cost as
+            // much as the rest of this loop on a chain.
+            let (mut s, mut gg, mut vv) = (0.0, 0.0, 0.0);
             for a in 0..ar {
                 let i = ik[a] as usize;
                 for c in 0..d {
-                    v[a * d + c] = inv_mass[i] * p[i * d + c];
-                    s += gk[a * d + c] * v[a * d + c];
+                    let (g, v) = (gk[a * d + c], inv_mass[i] * p[i * d + c]);
+                    s += g * v;
+                    gg += g * g;
+                    vv += v * v;
                 }
             }
             out[k] = s;
             if ratio {
-                use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
-                let mut r = relative_dot_after(gk, &v[..w], 0.0);
+                use crate::tolerance::{relative_dot_from_sums, HIDDEN_LIMIT};
+                let rel = |b0_sq: f64| {
+                    relative_dot_from_sums(s, gg, vv, b0_sq)
+                        .unwrap_or_else(|| hidden_scaled(gk, ik, d, inv_mass, p, b0_sq))
+                };
+                let mut r = rel(0.0);
                 if !(r <= HIDDEN_LIMIT) {
-                    r = relative_dot_after(gk, &v[..w], before[k]);
+                    r = rel(before[k]);
                 }
                 if crate::tolerance::worse(r, worst) {
                     worst = r;
                 }
             } else {
-                before[k] = v[..w].iter().map(|v| v * v).sum();
+                before[k] = vv;
             }
         }
         worst
     }
+}
+
+/// A member's relative hidden constraint where the squares of
+/// [`ConstraintFamily::hidden`]'s sums are not safe: the velocities
+/// gathered, then `relative_dot_after`'s scaled form.
+#[cold]
+fn hidden_scaled(gk: &[f64], ik: &[u32], d: usize, inv_mass: &[f64], p: &[f64], b0_sq: f64) -> f64 {
+    let mut v = [0.0; MAX_LOCAL];
+    for (a, &i) in ik.iter().enumerate() {
+        let i = i as usize;
+        for c in 0..d {
+            v[a * d + c] = inv_mass[i] * p[i * d + c];
+        }
+    }
+    crate::tolerance::relative_dot_after(gk, &v[..gk.len()], b0_sq)
 }
 
 impl<S: Stencil> PotentialFamily for Family<S> {
