@@ -54,7 +54,9 @@
 //! let mut rattle = Rattle::new(system, 2.0, Options::default())?;
 //! rattle.project(&mut state)?;
 //! generate::set_temperature(rattle.system(), &mut state, 300.0);
-//! let traj = rattle.run(&state, Stop::Steps(500)).execute().into_result()?;
+//! let out = rattle.run(&state, Stop::Steps(500)).execute();
+//! assert!(out.error.is_none());
+//! let traj = out.trajectory;
 //! let dir = std::env::temp_dir();
 //! geoshake::plot::energy_error(&traj, &mut rattle, dir.join("water_energy.png"))?;
 //! geoshake::plot::constraint_residual(&traj, &mut rattle, dir.join("water_residual.svg"))?;
