@@ -33,6 +33,26 @@ fn svg_size(path: &Path) -> (u32, u32) {
     (attr("width"), attr("height"))
 }
 
+/// `dir/name`, with no file there yet.
+fn fresh(dir: &Path, name: &str) -> PathBuf {
+    let path = dir.join(name);
+    let _ = std::fs::remove_file(&path);
+    path
+}
+
+/// Asserts that `path` holds a drawn figure of the documented size: a
+/// blank 900×600 PNG compresses to a few kB, text and curves take far
+/// more.
+fn assert_drawn(path: &Path) {
+    assert!(std::fs::metadata(path).unwrap().len() > 10_000, "{path:?}");
+    let size = if path.extension().is_some_and(|e| e == "png") {
+        png_size(path)
+    } else {
+        svg_size(path)
+    };
+    assert_eq!(size, SIZE, "{path:?}");
+}
+
 fn pendulum_run(steps: u64) -> (Pendulum, Trajectory) {
     let pendulum = Pendulum {
         gravity: 9.81,
@@ -55,25 +75,14 @@ fn each_figure_is_a_png_and_an_svg_of_the_documented_size() {
     let (pendulum, traj) = pendulum_run(100_000);
     let dir = out_dir();
     for ext in ["png", "svg"] {
-        let phase = dir.join(format!("phase.{ext}"));
-        let energy = dir.join(format!("energy.{ext}"));
-        let residual = dir.join(format!("residual.{ext}"));
-        for p in [&phase, &energy, &residual] {
-            let _ = std::fs::remove_file(p);
-        }
+        let phase = fresh(&dir, &format!("phase.{ext}"));
+        let energy = fresh(&dir, &format!("energy.{ext}"));
+        let residual = fresh(&dir, &format!("residual.{ext}"));
         plot::phase_portrait(&traj, &phase).unwrap();
         plot::energy_error(&traj, &pendulum, &energy).unwrap();
         plot::constraint_residual(&traj, &pendulum, &residual).unwrap();
         for p in [&phase, &energy, &residual] {
-            // A blank 900×600 PNG compresses to a few kB; text and curves
-            // take far more.
-            assert!(std::fs::metadata(p).unwrap().len() > 10_000, "{p:?}");
-            let size = if ext == "png" {
-                png_size(p)
-            } else {
-                svg_size(p)
-            };
-            assert_eq!(size, SIZE, "{p:?}");
+            assert_drawn(p);
         }
     }
     let svg = std::fs::read_to_string(dir.join("residual.svg")).unwrap();
@@ -149,6 +158,12 @@ fn waters(n: usize, tether: bool) -> (Rattle, ParticleState) {
     (rattle, state)
 }
 
+/// `steps` steps of `rattle` from `state`, every `stride`-th stored.
+fn water_run(rattle: &mut Rattle, state: &ParticleState, steps: u64, stride: u64) -> Trajectory {
+    let run = rattle.run(state, Stop::Steps(steps)).stride(stride);
+    run.execute().into_result().unwrap()
+}
+
 /// The tether's spring constant, g/mol/fs² (about 0.02 kcal/mol/Å²).
 const TETHER: f64 = 1e-5;
 
@@ -157,28 +172,15 @@ fn a_particle_run_is_drawn_as_a_png_and_an_svg() {
     // 27 waters, 5000 steps of 2 fs (10 ps): more states than pixel
     // columns, so the energy error is drawn as its band.
     let (mut rattle, state) = waters(27, false);
-    let traj = rattle
-        .run(&state, Stop::Steps(5000))
-        .execute()
-        .into_result()
-        .unwrap();
+    let traj = water_run(&mut rattle, &state, 5000, 1);
     let dir = out_dir();
     for ext in ["png", "svg"] {
-        let energy = dir.join(format!("water_energy.{ext}"));
-        let residual = dir.join(format!("water_residual.{ext}"));
-        for p in [&energy, &residual] {
-            let _ = std::fs::remove_file(p);
-        }
+        let energy = fresh(&dir, &format!("water_energy.{ext}"));
+        let residual = fresh(&dir, &format!("water_residual.{ext}"));
         plot::energy_error(&traj, &mut rattle, &energy).unwrap();
         plot::constraint_residual(&traj, &mut rattle, &residual).unwrap();
         for p in [&energy, &residual] {
-            assert!(std::fs::metadata(p).unwrap().len() > 10_000, "{p:?}");
-            let size = if ext == "png" {
-                png_size(p)
-            } else {
-                svg_size(p)
-            };
-            assert_eq!(size, SIZE, "{p:?}");
+            assert_drawn(p);
         }
     }
     let svg = std::fs::read_to_string(dir.join("water_residual.svg")).unwrap();
@@ -219,12 +221,7 @@ fn bond_residuals(rattle: &Rattle, q: &[f64], p: &[f64]) -> [f64; 2] {
 #[test]
 fn a_particle_figure_measures_the_energy_and_the_bond_errors_of_each_state() {
     let (mut rattle, state) = waters(8, true);
-    let traj = rattle
-        .run(&state, Stop::Steps(200))
-        .stride(50)
-        .execute()
-        .into_result()
-        .unwrap();
+    let traj = water_run(&mut rattle, &state, 200, 50);
     // The stored states (on M and M^H to round-off), and one moved off
     // both: every coordinate and momentum changed by up to a percent.
     let mut states: Vec<(Vec<f64>, Vec<f64>)> = (0..traj.len())
@@ -283,11 +280,7 @@ fn a_particle_state_that_is_not_a_number_is_named_and_a_wrong_size_refused() {
     let never = dir.join("never_water.png");
     let _ = std::fs::remove_file(&never);
     let (mut rattle, state) = waters(8, true);
-    let traj = rattle
-        .run(&state, Stop::Steps(10))
-        .execute()
-        .into_result()
-        .unwrap();
+    let traj = water_run(&mut rattle, &state, 10, 1);
     // Step 7's x of atom 0 is NaN: H (through V) and g are not numbers there.
     let mut csv = Vec::new();
     traj.write_csv(&mut csv).unwrap();
