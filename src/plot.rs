@@ -33,13 +33,46 @@
 //! # Ok(())
 //! # }
 //! ```
+//!
+//! # A particle run
+//!
+//! The solver of a particle run ([`particles::Rattle`](crate::particles::Rattle))
+//! is no [`Hamiltonian`](crate::Hamiltonian): pass it as `&mut rattle`
+//! where a system is `&system`. What a figure measures of a stored state,
+//! the energy and the two residuals, is the trait pair [`Energy`] and
+//! [`Residuals`], implemented for both; the drawing is the same. A
+//! particle run's residuals are relative to each member's own scale, as
+//! the solver's tolerance judges them (the axis says so): for a bond, the
+//! relative error of its length to first order.
+//!
+//! ```
+//! use geoshake::particles::{generate, Options, Rattle};
+//! use geoshake::Stop;
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! // 8 rigid waters (LAMMPS `real` units: Å, fs), 2 fs steps.
+//! let (system, mut state) = generate::water(8, 1)?;
+//! let mut rattle = Rattle::new(system, 2.0, Options::default())?;
+//! rattle.project(&mut state)?;
+//! generate::set_temperature(rattle.system(), &mut state, 300.0);
+//! let out = rattle.run(&state, Stop::Steps(500)).execute();
+//! assert!(out.error.is_none());
+//! let traj = out.trajectory;
+//! let dir = std::env::temp_dir();
+//! geoshake::plot::energy_error(&traj, &mut rattle, dir.join("water_energy.png"))?;
+//! geoshake::plot::constraint_residual(&traj, &mut rattle, dir.join("water_residual.svg"))?;
+//! # Ok(())
+//! # }
+//! ```
 
+mod measure;
 mod text;
 
-use crate::{ConstrainedSystem, Hamiltonian, Trajectory};
+use crate::Trajectory;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
+
+pub use measure::{Energy, Residuals};
 
 /// Width and height of every figure, in pixels (SVG: user units).
 pub const SIZE: (u32, u32) = (900, 600);
@@ -190,7 +223,9 @@ pub fn phase_portrait(traj: &Trajectory, path: impl AsRef<Path>) -> Result<(), P
 
 /// The energy error against time: (H(z_n) − H(z_0)) / |H(z_0)|, or the
 /// absolute error H(z_n) − H(z_0) when H(z_0) = 0 (the axis label says
-/// which), on a linear axis (a drift shows as a trend).
+/// which), on a linear axis (a drift shows as a trend). `system` is `&S`
+/// for a [`Hamiltonian`](crate::Hamiltonian) S, or `&mut rattle` for a particle run
+/// ([`Energy`]).
 ///
 /// ```
 /// use geoshake::prelude::*;
@@ -199,18 +234,18 @@ pub fn phase_portrait(traj: &Trajectory, path: impl AsRef<Path>) -> Result<(), P
 /// let traj = Integrator::new(p, StormerVerlet, 0.05).rattle().run(p.state(0.5, 0.0), Stop::Steps(200)).execute().trajectory;
 /// geoshake::plot::energy_error(&traj, &p, std::env::temp_dir().join("shake_doc_energy.png")).unwrap();
 /// ```
-pub fn energy_error<S: Hamiltonian>(
+pub fn energy_error<S: Energy>(
     traj: &Trajectory,
-    system: &S,
+    mut system: S,
     path: impl AsRef<Path>,
 ) -> Result<(), PlotError> {
     check(traj, system.dof())?;
-    let e0 = system.hamiltonian(traj.q(0), traj.p(0));
+    let e0 = system.energy(traj.q(0), traj.p(0));
     finite(traj, 0, "H", e0)?;
     let scale = if e0 == 0.0 { 1.0 } else { e0.abs() };
     let mut points = Vec::with_capacity(traj.len());
     for i in 0..traj.len() {
-        let e = system.hamiltonian(traj.q(i), traj.p(i));
+        let e = system.energy(traj.q(i), traj.p(i));
         finite(traj, i, "H", e)?;
         points.push((traj.time(i), (e - e0) / scale));
     }
@@ -239,9 +274,11 @@ pub fn energy_error<S: Hamiltonian>(
     chart.write(path.as_ref())
 }
 
-/// The constraint residuals against time: max_i |g_i(z_n)| (the
-/// constraint, M) and max_i |{g_i, H}(z_n)| (the hidden constraint, M^H),
-/// on a logarithmic axis.
+/// The constraint residuals against time, on a logarithmic axis: max_i
+/// |g_i(z_n)| (the constraint, M) and max_i |{g_i, H}(z_n)| (the hidden
+/// constraint, M^H). `system` is `&S` for a [`ConstrainedSystem`](crate::ConstrainedSystem) S, or
+/// `&mut rattle` for a particle run, whose residuals are relative to each
+/// member's scale ([`Residuals`]).
 ///
 /// ```
 /// use geoshake::prelude::*;
@@ -250,38 +287,50 @@ pub fn energy_error<S: Hamiltonian>(
 /// let traj = Integrator::new(p, StormerVerlet, 0.05).shake().run(p.state(0.5, 0.0), Stop::Steps(200)).execute().trajectory;
 /// geoshake::plot::constraint_residual(&traj, &p, std::env::temp_dir().join("shake_doc_residual.svg")).unwrap();
 /// ```
-pub fn constraint_residual<S: ConstrainedSystem>(
+pub fn constraint_residual<S: Residuals>(
     traj: &Trajectory,
-    system: &S,
+    mut system: S,
     path: impl AsRef<Path>,
 ) -> Result<(), PlotError> {
     check(traj, system.dof())?;
     let m = system.constraint_count();
-    let mut g = vec![0.0; m];
+    // (What is plotted, its legend and the axis.)
+    let (names, legends, y_label) = if S::RELATIVE {
+        (
+            ["relative |g|", "relative |{g,H}|"],
+            [
+                "|g| / (|∇g| · extent): constraint",
+                "|{g,H}| / (|∇g| · |M⁻¹p|): hidden constraint",
+            ],
+            "relative residual (max over constraints)",
+        )
+    } else {
+        (
+            ["|g|", "|{g,H}|"],
+            ["|g|: constraint", "|{g,H}|: hidden constraint"],
+            "residual (max over constraints)",
+        )
+    };
     let (mut primary, mut hidden) = (Vec::new(), Vec::new());
     for i in 0..traj.len() {
-        let (q, p) = (traj.q(i), traj.p(i));
-        system.constraints(q, p, &mut g);
-        let r = max_abs(&g);
-        finite(traj, i, "|g|", r)?;
-        system.hidden_constraints(q, p, &mut g);
-        let s = max_abs(&g);
-        finite(traj, i, "|{g,H}|", s)?;
+        let [r, s] = system.residuals(traj.q(i), traj.p(i));
+        finite(traj, i, names[0], r)?;
+        finite(traj, i, names[1], s)?;
         primary.push((traj.time(i), r));
         hidden.push((traj.time(i), s));
     }
     let chart = Chart {
         title: "Constraint residuals".into(),
         x_label: "t".into(),
-        y_label: "residual (max over constraints)".into(),
+        y_label: y_label.into(),
         look: Look::Dots,
         curves: vec![
             Curve {
-                name: "|g|: constraint".into(),
+                name: legends[0].into(),
                 points: primary,
             },
             Curve {
-                name: "|{g,H}|: hidden constraint".into(),
+                name: legends[1].into(),
                 points: hidden,
             },
         ],
@@ -322,17 +371,6 @@ fn finite(
             t: traj.time(i),
         })
     }
-}
-
-fn max_abs(x: &[f64]) -> f64 {
-    // NaN must survive (f64::max would drop it).
-    x.iter().fold(0.0, |m: f64, v| {
-        if v.abs() > m || v.is_nan() {
-            v.abs()
-        } else {
-            m
-        }
-    })
 }
 
 /// A number for a note: six significant digits at most.

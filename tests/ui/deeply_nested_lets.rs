@@ -1,7 +1,7 @@
 use geoshake::constrained_system;
 
 // Nested `let`s past the documented depth (1000): refused at the first one past it, with
-// no cascade (2*10^4 of them are tested on the expansion in shake-macros/src/tests.rs).
+// no cascade (2*10^4 of them are tested on the expansion in shake-macros/src/tests/limits.rs).
 constrained_system! {
     pub struct Hostile {
         dof q[2], p[2];

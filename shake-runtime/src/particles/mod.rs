@@ -61,6 +61,7 @@
 mod adjust;
 mod cluster;
 mod error;
+mod family;
 mod forces;
 pub mod generate;
 mod global;
@@ -81,6 +82,7 @@ mod virial;
 
 pub use crate::report::StepInfo;
 pub use error::TopologyError;
+pub use family::{ClusterKernel, ConstraintFamily, PotentialFamily};
 pub use forces::ForceField;
 pub use options::{Method, Options, SolverChoice};
 #[doc(hidden)]
@@ -88,7 +90,7 @@ pub use plan::{ClusterArgs, ClusterFailure, ClusterReport, FamilyClusters};
 pub use rattle::Rattle;
 pub use state::ParticleState;
 pub use stencil::Stencil;
-pub use system::{ClusterKernel, ConstraintFamily, ParticleSystem, PotentialFamily};
+pub use system::ParticleSystem;
 pub use table::Table;
 pub use thermostat::Langevin;
 pub use virial::ConstraintForces;

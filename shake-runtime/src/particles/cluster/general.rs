@@ -7,7 +7,7 @@ use crate::newton::{Rate, Residuals};
 use crate::particles::stencil::{member_at_roundoff, member_scale};
 use crate::tolerance::{relative_dot_after, HIDDEN_LIMIT};
 
-pub(super) const ML: usize = crate::particles::system::MAX_LOCAL;
+pub(super) const ML: usize = crate::particles::family::MAX_LOCAL;
 
 /// One cluster's local copy: coordinates, momenta, inverse masses, and the
 /// member blocks of G. Stack arrays, set up once per family per stage.

@@ -17,11 +17,11 @@
 //! The kernels are generic over the [`Stencil`], so each family's loop over
 //! its clusters is monomorphic: no dynamic call per member.
 
+use super::family::{ClusterKernel, Family};
 pub(crate) use super::plan::{
     Block, ClusterArgs, ClusterFailure, ClusterReport, FailureKind, FamilyClusters, MAX_CLUSTER,
     MAX_CLUSTER_COORDS,
 };
-use super::system::{ClusterKernel, Family};
 use super::{Stencil, Table};
 use crate::tolerance::HIDDEN_LIMIT;
 
