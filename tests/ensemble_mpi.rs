@@ -19,11 +19,25 @@ fn example() -> PathBuf {
 
 fn build_example() -> PathBuf {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    // With the features this test was built with: CI builds it beside the
+    // arrow, plot and progress tests in one feature set, and the example
+    // then reuses the runtime and facade compiled for them instead of
+    // compiling them once more for `mpi` alone.
+    let features = [
+        ("mpi", cfg!(feature = "mpi")),
+        ("arrow", cfg!(feature = "arrow")),
+        ("plot", cfg!(feature = "plot")),
+        ("progress", cfg!(feature = "progress")),
+    ]
+    .into_iter()
+    .filter_map(|(name, on)| on.then_some(name))
+    .collect::<Vec<&str>>()
+    .join(",");
     let mut build = Command::new(cargo);
     build.current_dir(env!("CARGO_MANIFEST_DIR")).args([
         "build",
         "--features",
-        "mpi",
+        features.as_str(),
         "--example",
         "ensemble_mpi",
     ]);

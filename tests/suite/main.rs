@@ -17,6 +17,7 @@ mod capitalised_parameters;
 mod classical_agrees;
 mod constraint_forces;
 mod custom_base_map;
+mod declarations;
 mod declared_particles;
 mod declared_systems;
 mod error_variants;
