@@ -14,18 +14,19 @@
 //! that two builds can be compared for bit-identical chains; instructions
 //! per transition are callgrind's total over the transitions printed (the
 //! declaration itself costs about 1 % of a run). Arguments:
-//! `static|dynamic [warmup draws [variant]]`, the variant one of `tape`
-//! (the default), `tape-fixed` (the tape through the fixed-size step, as
-//! if the declared system offered its sizes), `compiled` (the same system
-//! from `constrained_system!`) and `compiled-slices` (that one on the
-//! slice path). `TAPES=1` prints the size of each tape.
+//! `static|dynamic [warmup draws [variant]]`, the variant `tape` (the
+//! default) or `compiled` (the same system from `constrained_system!`,
+//! the sampler example's `Rotation`). `TAPES=1` prints the size of each
+//! tape.
 
-use geoshake::constrained_system;
 use geoshake::declared::DeclaredSystem;
-use geoshake::runtime::{ClosedForm, ConstraintKind, Hamiltonian, SizeVisitor};
 use geoshake::sampler::{sample, SamplerOptions, Samples};
-use geoshake::ConstrainedSystem;
 
+#[path = "sampler/targets.rs"]
+#[allow(dead_code)]
+mod targets;
+
+/// `targets::Rotation` as `examples/sampler.py` declares it.
 const ROTATION: &str = "struct Rotation {
     parameters { kappa }
     dof q[9], p[9];
@@ -40,109 +41,6 @@ const ROTATION: &str = "struct Rotation {
         c12: q[1] * q[2] + q[4] * q[5] + q[7] * q[8],
     }
 }";
-
-constrained_system! {
-    /// The same system, compiled by the macro: the fixed-size step on
-    /// straight-line code, for comparison (`compiled` as third argument).
-    pub struct Compiled {
-        parameters { kappa }
-        dof q[9], p[9];
-        hamiltonian = (p[0]^2 + p[1]^2 + p[2]^2 + p[3]^2 + p[4]^2 + p[5]^2
-            + p[6]^2 + p[7]^2 + p[8]^2) / 2 - kappa * (q[0] + q[4] + q[8]);
-        constraints {
-            c00: q[0]^2 + q[3]^2 + q[6]^2 - 1,
-            c11: q[1]^2 + q[4]^2 + q[7]^2 - 1,
-            c22: q[2]^2 + q[5]^2 + q[8]^2 - 1,
-            c01: q[0] * q[1] + q[3] * q[4] + q[6] * q[7],
-            c02: q[0] * q[2] + q[3] * q[5] + q[6] * q[8],
-            c12: q[1] * q[2] + q[4] * q[5] + q[7] * q[8],
-        }
-    }
-}
-
-/// `S` with its sizes offered as (D, M) = (9, 6) (`FIXED`) or not at all:
-/// the fixed-size step for the tape, the slice step for compiled code.
-#[derive(Clone)]
-struct Sizes<S, const FIXED: bool>(S);
-
-impl<S: ConstrainedSystem, const FIXED: bool> Hamiltonian for Sizes<S, FIXED> {
-    fn dof(&self) -> usize {
-        self.0.dof()
-    }
-    fn separable(&self) -> bool {
-        self.0.separable()
-    }
-    fn quadratic_kinetic(&self) -> bool {
-        self.0.quadratic_kinetic()
-    }
-    fn hamiltonian(&self, q: &[f64], p: &[f64]) -> f64 {
-        self.0.hamiltonian(q, p)
-    }
-    fn grad_q(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.grad_q(q, p, o)
-    }
-    fn grad_p(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.grad_p(q, p, o)
-    }
-    fn gradient(&self, q: &[f64], p: &[f64], a: &mut [f64], b: &mut [f64]) {
-        self.0.gradient(q, p, a, b)
-    }
-    fn hessian(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.hessian(q, p, o)
-    }
-}
-
-impl<S: ConstrainedSystem, const FIXED: bool> ConstrainedSystem for Sizes<S, FIXED> {
-    fn constraint_count(&self) -> usize {
-        self.0.constraint_count()
-    }
-    fn kind(&self) -> ConstraintKind {
-        self.0.kind()
-    }
-    fn quadratic_constraints(&self) -> bool {
-        self.0.quadratic_constraints()
-    }
-    fn interpreted(&self) -> bool {
-        self.0.interpreted()
-    }
-    fn jacobian_pattern(&self) -> &[(usize, usize)] {
-        self.0.jacobian_pattern()
-    }
-    fn constraint_name(&self, i: usize) -> &str {
-        self.0.constraint_name(i)
-    }
-    fn constraints(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.constraints(q, p, o)
-    }
-    fn constraint_jacobian(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.constraint_jacobian(q, p, o)
-    }
-    fn constraint_jacobian_values(&self, q: &[f64], p: &[f64], o: &mut [f64]) -> bool {
-        self.0.constraint_jacobian_values(q, p, o)
-    }
-    fn constraint_hessian(&self, q: &[f64], p: &[f64], l: &[f64], o: &mut [f64]) {
-        self.0.constraint_hessian(q, p, l, o)
-    }
-    fn hidden_constraints(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.hidden_constraints(q, p, o)
-    }
-    fn hidden_constraint_jacobian(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.hidden_constraint_jacobian(q, p, o)
-    }
-    fn nondegeneracy_matrix(&self, q: &[f64], p: &[f64], o: &mut [f64]) {
-        self.0.nondegeneracy_matrix(q, p, o)
-    }
-    fn fibre_flow(&self, l: &[f64], q: &mut [f64], p: &mut [f64]) -> ClosedForm {
-        self.0.fibre_flow(l, q, p)
-    }
-    fn with_sizes<V: SizeVisitor<Self>>(&self, v: V) -> V::Output {
-        if FIXED {
-            v.fixed::<9, 6>(self)
-        } else {
-            v.dynamic(self)
-        }
-    }
-}
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -165,9 +63,7 @@ fn main() {
         ..SamplerOptions::default()
     };
     let s: Samples = if variant == "compiled" {
-        sample(&Compiled { kappa: 1.0 }, &[q0], &opts).unwrap()
-    } else if variant == "compiled-slices" {
-        sample(&Sizes::<_, false>(Compiled { kappa: 1.0 }), &[q0], &opts).unwrap()
+        sample(&targets::Rotation { kappa: 1.0 }, &[q0], &opts).unwrap()
     } else {
         let system = DeclaredSystem::new(ROTATION, &[("kappa", 1.0)]).unwrap();
         if std::env::var_os("TAPES").is_some() {
@@ -184,11 +80,7 @@ fn main() {
                 eprintln!("tape {n} ops={} outs={}", t.len(), t.outputs().count());
             }
         }
-        if variant == "tape-fixed" {
-            sample(&Sizes::<_, true>(system), &[q0], &opts).unwrap()
-        } else {
-            sample(&system, &[q0], &opts).unwrap()
-        }
+        sample(&system, &[q0], &opts).unwrap()
     };
     let mut hash = 0xcbf2_9ce4_8422_2325u64;
     let mut mix = |x: u64| {
