@@ -5,9 +5,11 @@
 //! trajectory.
 
 mod bonds;
+mod forces;
 mod models;
 mod particles;
 mod sampler;
+mod thermostat;
 
 use geoshake::declared::{DeclareError, DeclaredSystem};
 use geoshake::{
@@ -793,6 +795,8 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<particles::DeclaredParticles>()?;
     m.add_class::<particles::ParticleRattle>()?;
     m.add_class::<particles::ParticleRun>()?;
+    m.add_class::<particles::ConstraintForces>()?;
+    m.add_class::<thermostat::Langevin>()?;
     m.add_function(wrap_pyfunction!(declare, m)?)?;
     m.add_function(wrap_pyfunction!(particles::declare_particles, m)?)?;
     m.add_function(wrap_pyfunction!(model, m)?)?;

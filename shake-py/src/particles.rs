@@ -4,17 +4,24 @@
 //! SHAKE (`geoshake::runtime::particles::Rattle`) on NumPy arrays of shape
 //! (n, D).
 
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use geoshake::declared::{DeclaredParticles as Declared, FamilyKind};
-use geoshake::runtime::particles::{Method, Options, ParticleState, Rattle, Table, TopologyError};
-use geoshake::{RunOutcome, Stop};
+use geoshake::runtime::ensemble::Template;
+use geoshake::runtime::particles::{
+    ConstraintForces as Forces, Method, Options, ParticleState, Rattle, Table, TopologyError,
+};
+use geoshake::{RunOutcome, StepError, Stop};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3};
+use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::bonds::{error, topology};
+use crate::forces::{self, type_name, PyForces};
+use crate::thermostat::Langevin;
 use crate::{declare_error, keyword_parameters, real_array, InvalidInputError};
 
 /// Declares a particle system from a string in the grammar of
@@ -106,10 +113,21 @@ impl DeclaredParticles {
     /// constraint's relative residual at the end of a step (default 1e-12,
     /// in [4ε, 1)), `max_iterations` Newton's budget per step (default 50).
     ///
+    /// `forces`, a callable `forces(q) -> (V, F)` with q and F of shape
+    /// (n, D) and V a float, adds an external potential V_ext(q) with its
+    /// forces F = −∇V_ext(q) to the declared potential families:
+    /// H = Σ |p_a|²/(2 m_a) + Σ_fam V_fam + V_ext. It is called once per
+    /// step (at the step's new positions) and once when a run starts.
+    ///
+    /// `thermostat`, a `geoshake.Langevin`, makes every step a g-BAOAB
+    /// Langevin step at its k_B T (RATTLE only).
+    ///
     /// A table missing, unknown or of the wrong shape, an index that is not
     /// a particle's, a member repeated, a mass not finite and positive, an
-    /// h or a tolerance out of range raise `InvalidInputError`.
-    #[pyo3(signature = (masses, tables, h, *, method="rattle", tolerance=None, max_iterations=None))]
+    /// h or a tolerance out of range, `forces` not callable, `thermostat`
+    /// not a `Langevin` or given to SHAKE raise `InvalidInputError`.
+    #[pyo3(signature = (masses, tables, h, *, method="rattle", tolerance=None, max_iterations=None,
+        forces=None, thermostat=None))]
     #[allow(clippy::too_many_arguments)]
     fn system(
         &self,
@@ -120,6 +138,8 @@ impl DeclaredParticles {
         method: &str,
         tolerance: Option<f64>,
         max_iterations: Option<usize>,
+        forces: Option<&Bound<'_, PyAny>>,
+        thermostat: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<ParticleRattle> {
         let method = match method {
             "rattle" => Method::Rattle,
@@ -130,9 +150,31 @@ impl DeclaredParticles {
                 )))
             }
         };
+        let thermostat = match thermostat {
+            None => None,
+            Some(t) => Some(
+                t.cast::<Langevin>()
+                    .map_err(|_| {
+                        InvalidInputError::new_err(format!(
+                            "thermostat must be a geoshake.Langevin or None, not {}",
+                            type_name(t)
+                        ))
+                    })?
+                    .get()
+                    .clone(),
+            ),
+        };
         let masses = vector(masses, "masses")?;
         let rows = self.tables(tables)?;
         let system = self.declared.system(masses, rows).map_err(declare_error)?;
+        let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
+        let system = match forces {
+            None => system,
+            Some(f) => {
+                let field = PyForces::new(f, system.particles(), system.dim(), id)?;
+                system.with_forces(field)
+            }
+        };
         let defaults = Options::default();
         let options = Options {
             tol: tolerance.unwrap_or(defaults.tol),
@@ -142,13 +184,18 @@ impl DeclaredParticles {
         };
         let (particles, dim, constraints) =
             (system.particles(), system.dim(), system.constraints());
-        let rattle = Rattle::new(system, h, options).map_err(|e| error(py, &e))?;
+        let mut rattle = Rattle::new(system, h, options).map_err(|e| error(py, &e))?;
+        rattle
+            .set_thermostat(thermostat.as_ref().map(|t| t.inner))
+            .map_err(|e| error(py, &e))?;
         Ok(ParticleRattle {
-            rattle: Mutex::new(rattle),
+            solver: Mutex::new(Solver { rattle, last: None }),
+            id,
             particles,
             dim,
             constraints,
             h,
+            thermostat,
         })
     }
 
@@ -251,17 +298,73 @@ fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
     Ok(real_array(obj, name, 1, shape[0], "one per particle, n")?.0)
 }
 
+/// The source of `ParticleRattle::id`.
+static NEXT_ID: AtomicUsize = AtomicUsize::new(1);
+
 /// RATTLE or SHAKE on a declared particle system, on positions and momenta
 /// of shape (n, D) (NumPy arrays; copies are returned, the arguments are
 /// left as they are). Errors are the package's (`NonFiniteError`,
-/// `NewtonError` with `member`, the constraint at fault, ...).
+/// `NewtonError` with `member`, the constraint at fault, ...); an
+/// exception of the forces callable is raised as it was raised.
 #[pyclass(frozen, module = "geoshake")]
 pub(crate) struct ParticleRattle {
-    rattle: Mutex<Rattle>,
+    solver: Mutex<Solver>,
+    /// Tells this solver's forces callable apart from others' (a callable
+    /// may run another system, not the one that called it).
+    id: usize,
     particles: usize,
     dim: usize,
     constraints: usize,
     h: f64,
+    thermostat: Option<Langevin>,
+}
+
+/// The solver and the last state its `step` made: given back to `step`,
+/// that state goes on with its step count (the thermostat's noise is a
+/// function of it) and its caches (the forces at q, the multipliers the
+/// constraint forces are read from), which arrays from Python do not carry.
+struct Solver {
+    rattle: Rattle,
+    last: Option<ParticleState>,
+}
+
+/// True when `a` and `b` hold the same numbers, bit for bit.
+fn same(a: &ParticleState, b: &ParticleState) -> bool {
+    let bits = |x: &[f64], y: &[f64]| x.iter().zip(y).all(|(x, y)| x.to_bits() == y.to_bits());
+    bits(a.q(), b.q()) && bits(a.p(), b.p())
+}
+
+/// The exception for an error `e` of a step or a run on this thread: the
+/// forces callable's own if it raised (the step's `NonFiniteError` only
+/// followed from it; a note on the exception names the step), else the
+/// package's.
+fn failure(py: Python<'_>, e: &StepError) -> PyErr {
+    match forces::take_raised() {
+        Some(raised) => noted(py, raised, e),
+        None => error(py, e),
+    }
+}
+
+/// A run's error, to keep in its `ParticleRun`; raised instead when it is
+/// not an `Exception` (a `KeyboardInterrupt` or `SystemExit` the forces
+/// callable let through: the user asked to stop, not the run to fail).
+fn interrupted(py: Python<'_>, error: Option<PyErr>) -> PyResult<Option<PyErr>> {
+    match error {
+        Some(e) if !e.is_instance_of::<PyException>(py) => Err(e),
+        error => Ok(error),
+    }
+}
+
+/// The forces callable's exception, with a note (Python ≥ 3.11) of the
+/// step it stopped.
+fn noted(py: Python<'_>, raised: PyErr, e: &StepError) -> PyErr {
+    let note = format!(
+        "raised by the forces callable in step {} (t = {})",
+        e.step(),
+        e.time().unwrap_or(f64::NAN)
+    );
+    let _ = raised.value(py).call_method1("add_note", (note,));
+    raised
 }
 
 /// A particle run: frames of shape (frames, n, D), their times and steps,
@@ -307,6 +410,42 @@ impl ParticleRun {
     }
 }
 
+/// The constraint forces of one step, their multipliers and their virial
+/// (`ParticleRattle.constraint_forces`).
+///
+/// The position stage of the step from q0 moves the unconstrained update by
+/// the constraint forces f_c = −Σ_k Λ_k ∇g_k(q0), acting at the start of
+/// the step (q0, at time t − h), so that
+/// q1 = q0 + h M⁻¹ p0 + (h²/2) M⁻¹ (F(q0) + f_c) with F = −∇V. The virial
+/// is W = Σ_a x_a ⊗ f_{c,a} at x = q0 (W / volume is the constraints' part
+/// of the pressure tensor, as LAMMPS' `fix shake` reports it). For a
+/// distance family g_k = |x_a − x_b|² − l_k², the bond's tension is
+/// 2 Λ_k l_k (positive when it pulls the two particles together) and
+/// tr W = −Σ_k 2 Λ_k l_k².
+#[pyclass(frozen, module = "geoshake")]
+pub(crate) struct ConstraintForces {
+    /// f_c, shape (n, D).
+    #[pyo3(get)]
+    forces: Py<PyArray2<f64>>,
+    /// W = Σ_a x_a ⊗ f_{c,a}, shape (D, D): `virial[r, c]` = Σ_a x_{a,r} f_{c,a,c}.
+    #[pyo3(get)]
+    virial: Py<PyArray2<f64>>,
+    /// Λ_k of every constraint, shape (m,): families in declaration order,
+    /// each family's members in the order of its table.
+    #[pyo3(get)]
+    multipliers: Py<PyArray1<f64>>,
+    /// The time of q0, where the forces act: the state's time − h.
+    #[pyo3(get)]
+    time: f64,
+}
+
+#[pymethods]
+impl ConstraintForces {
+    fn __repr__(&self) -> String {
+        format!("<geoshake.ConstraintForces at t = {}>", self.time)
+    }
+}
+
 /// Positions and momenta, each of shape (n, D).
 type Pair<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);
 
@@ -321,34 +460,53 @@ impl ParticleRattle {
         p: &Bound<'py, PyAny>,
     ) -> PyResult<Pair<'py>> {
         let mut state = self.state(q, p)?;
-        let mut rattle = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
-        let r: &mut Rattle = &mut rattle;
+        let mut solver = self.solver(py)?;
+        let r = &mut solver.rattle;
+        forces::take_raised();
         py.detach(|| r.project(&mut state))
-            .map_err(|e| error(py, &e))?;
+            .map_err(|e| failure(py, &e))?;
         Ok(self.pair(py, &state))
     }
 
     /// One step from (q, p): returns the new arrays (q, p), or raises the
-    /// step's error.
+    /// step's error (the forces callable's own exception if it raised).
+    ///
+    /// Given back the arrays its last call returned (the same numbers), a
+    /// step goes on from that state: its step count (with a thermostat,
+    /// the noise of step k is a function of the seed and k), the forces
+    /// already computed there, and `constraint_forces` of the step that
+    /// made it. Other arrays are a new state at step 0.
     fn step<'py>(
         &self,
         py: Python<'py>,
         q: &Bound<'py, PyAny>,
         p: &Bound<'py, PyAny>,
     ) -> PyResult<Pair<'py>> {
-        let mut state = self.state(q, p)?;
-        let mut rattle = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
-        let r: &mut Rattle = &mut rattle;
-        py.detach(|| r.step(&mut state))
-            .map_err(|e| error(py, &e))?;
-        Ok(self.pair(py, &state))
+        let given = self.state(q, p)?;
+        let mut solver = self.solver(py)?;
+        let Solver { rattle, last } = &mut *solver;
+        let mut state = match last.take() {
+            Some(s) if same(&s, &given) => s,
+            _ => given,
+        };
+        forces::take_raised();
+        py.detach(|| rattle.step(&mut state))
+            .map_err(|e| failure(py, &e))?;
+        let out = self.pair(py, &state);
+        *last = Some(state);
+        Ok(out)
     }
 
     /// `steps` steps from (q, p) at time `t0`, keeping every `stride`-th
     /// state (the first and the last always). The start is taken as given:
     /// bring it onto M and M^H with `project` first. A step that fails does
     /// not raise: the run returns the frames before it and the error in
-    /// `error`.
+    /// `error` (the forces callable's own exception if it raised).
+    ///
+    /// With a thermostat, the noise of step k of a run is a function of
+    /// the seed and k (counted from the run's start): a run continued from
+    /// another's last frame needs another seed (`Langevin.member`) not to
+    /// repeat the first run's noise.
     #[pyo3(signature = (q, p, steps, *, stride=1, t0=0.0))]
     fn run(
         &self,
@@ -360,17 +518,142 @@ impl ParticleRattle {
         t0: f64,
     ) -> PyResult<ParticleRun> {
         let state = self.state(q, p)?.with_time(t0);
-        let mut rattle = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
-        let r: &mut Rattle = &mut rattle;
+        let mut solver = self.solver(py)?;
+        let r = &mut solver.rattle;
+        forces::take_raised();
         let out = py.detach(|| r.run(&state, Stop::Steps(steps)).stride(stride).execute());
-        Ok(self.frames(py, &out))
+        let error = out.error.as_ref().map(|e| failure(py, e));
+        Ok(self.frames(py, &out, interrupted(py, error)?))
+    }
+
+    /// Runs every member (qs[i], ps[i]) as `run` does, in parallel on all
+    /// cores with the interpreter released; qs and ps have shape
+    /// (members, n, D). Returns one `ParticleRun` per member, in order:
+    /// member i is bit for bit the `run` of (qs[i], ps[i]), whatever the
+    /// number of threads, and a member that fails keeps its frames up to
+    /// the failure and its `error` while the others run on.
+    ///
+    /// With a thermostat, member i has its own noise: it runs with
+    /// `thermostat.member(i)` (member 0 with the thermostat itself). A
+    /// forces callable is called from several threads, one call at a time
+    /// (under the interpreter's lock).
+    #[pyo3(signature = (qs, ps, steps, *, stride=1, t0=0.0))]
+    fn ensemble(
+        &self,
+        py: Python<'_>,
+        qs: &Bound<'_, PyAny>,
+        ps: &Bound<'_, PyAny>,
+        steps: u64,
+        stride: u64,
+        t0: f64,
+    ) -> PyResult<Vec<ParticleRun>> {
+        let qs = self.members(qs, "qs")?;
+        let ps = self.members(ps, "ps")?;
+        if qs.len() != ps.len() {
+            return Err(InvalidInputError::new_err(format!(
+                "qs and ps must have the same number of members, not {} and {}",
+                qs.len(),
+                ps.len()
+            )));
+        }
+        let starts: Vec<ParticleState> = qs
+            .into_iter()
+            .zip(ps)
+            .map(|(q, p)| ParticleState::new(q, p).with_time(t0))
+            .collect();
+        let solver = self.solver(py)?;
+        let template = &solver.rattle;
+        let thermostat = self.thermostat.as_ref();
+        let outs = py.detach(|| {
+            geoshake::ensemble(template, &starts, |copy, i, start| {
+                forces::take_raised();
+                let member = thermostat.map(|t| t.for_member(i as u64).inner);
+                let out = match copy.set_thermostat(member) {
+                    Ok(()) => copy.run_member(start, Stop::Steps(steps), stride),
+                    Err(e) => RunOutcome {
+                        trajectory: Default::default(),
+                        summary: Default::default(),
+                        error: Some(e),
+                    },
+                };
+                (out, forces::take_raised())
+            })
+        });
+        outs.into_iter()
+            .map(|(out, raised)| {
+                let error = out.error.as_ref().map(|e| match raised {
+                    Some(raised) => noted(py, raised, e),
+                    None => error(py, e),
+                });
+                Ok(self.frames(py, &out, interrupted(py, error)?))
+            })
+            .collect()
     }
 
     /// The kinetic energy Σ_a |p_a|² / (2 m_a) of momenta of shape (n, D).
-    fn kinetic_energy(&self, p: &Bound<'_, PyAny>) -> PyResult<f64> {
+    fn kinetic_energy(&self, py: Python<'_>, p: &Bound<'_, PyAny>) -> PyResult<f64> {
         let (p, _) = self.array(p, "p")?;
-        let rattle = self.rattle.lock().unwrap_or_else(|e| e.into_inner());
-        Ok(rattle.system().kinetic_energy(&p))
+        let solver = self.solver(py)?;
+        Ok(solver.rattle.system().kinetic_energy(&p))
+    }
+
+    /// The potential energy V(q) = Σ_fam V_fam(q) + V_ext(q) of positions
+    /// of shape (n, D): the declared potential families and the forces
+    /// callable's V (0 without either). Raises the callable's exception if
+    /// it raises, `NonFiniteError` for forces or a V not finite.
+    fn potential_energy(&self, py: Python<'_>, q: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let (q, _) = self.array(q, "q")?;
+        let state = ParticleState::new(q, vec![0.0; self.particles * self.dim]);
+        let mut solver = self.solver(py)?;
+        let r = &mut solver.rattle;
+        forces::take_raised();
+        py.detach(|| r.potential_energy(&state))
+            .map_err(|e| failure(py, &e))
+    }
+
+    /// The constraint forces, their multipliers and their virial
+    /// (`ConstraintForces`) of the RATTLE or SHAKE step that made (q, p):
+    /// (q, p) must be what the last `step` returned (the multipliers are
+    /// that step's; none is solved for). Raises `InvalidInputError` for
+    /// any other state (initial data, a projection, a run's frame, a
+    /// thermostatted step: a g-BAOAB step spreads the constraint forces
+    /// over its drifts and has no single f_c at q0).
+    fn constraint_forces(
+        &self,
+        py: Python<'_>,
+        q: &Bound<'_, PyAny>,
+        p: &Bound<'_, PyAny>,
+    ) -> PyResult<ConstraintForces> {
+        let given = self.state(q, p)?;
+        let solver = self.solver(py)?;
+        let state = match &solver.last {
+            Some(s) if same(s, &given) => s,
+            _ => &given,
+        };
+        let mut fc = Forces::new(solver.rattle.system());
+        solver
+            .rattle
+            .constraint_forces(state, &mut fc)
+            .map_err(|e| error(py, &e))?;
+        let d = self.dim;
+        Ok(ConstraintForces {
+            forces: Array2::from_shape_vec((self.particles, d), fc.forces)
+                .expect("n·D forces")
+                .into_pyarray(py)
+                .unbind(),
+            virial: Array2::from_shape_vec((d, d), fc.virial)
+                .expect("D·D virial")
+                .into_pyarray(py)
+                .unbind(),
+            multipliers: Array1::from(fc.multipliers).into_pyarray(py).unbind(),
+            time: fc.time,
+        })
+    }
+
+    /// The thermostat (a `geoshake.Langevin`), or None.
+    #[getter]
+    fn thermostat(&self) -> Option<Langevin> {
+        self.thermostat.clone()
     }
 
     /// n, the number of particles.
@@ -399,27 +682,48 @@ impl ParticleRattle {
 
     /// "clusters", "band" or "sparse": the solver chosen for the
     /// constraints' graph.
-    #[getter]
-    fn solver(&self) -> &'static str {
-        self.rattle
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .solver_name()
+    #[getter(solver)]
+    fn solver_name(&self, py: Python<'_>) -> PyResult<&'static str> {
+        Ok(self.solver(py)?.rattle.solver_name())
     }
 
-    fn __repr__(&self) -> String {
-        format!(
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        Ok(format!(
             "<geoshake.ParticleRattle: {} particles in R^{}, {} constraints, h={}, solver {}>",
             self.particles,
             self.dim,
             self.constraints,
             self.h,
-            self.solver()
-        )
+            self.solver_name(py)?
+        ))
     }
 }
 
 impl ParticleRattle {
+    /// The solver, waiting for another thread's call to end; refused to a
+    /// call from this solver's own forces callable, which the call that
+    /// holds the solver is waiting for.
+    fn solver(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, Solver>> {
+        loop {
+            match self.solver.try_lock() {
+                Ok(s) => return Ok(s),
+                Err(TryLockError::Poisoned(s)) => return Ok(s.into_inner()),
+                Err(TryLockError::WouldBlock) => {
+                    if forces::calling(self.id) {
+                        return Err(InvalidInputError::new_err(
+                            "the forces callable of this ParticleRattle cannot use it: the step \
+                             that called the callable holds it (declare a second system for the \
+                             callable to use)",
+                        ));
+                    }
+                    // (The holder may be waiting for the interpreter to call
+                    // its forces callable.)
+                    py.detach(std::thread::yield_now);
+                }
+            }
+        }
+    }
+
     /// An (n, D) array, flattened particle by particle.
     fn array(&self, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(Vec<f64>, usize)> {
         let (flat, rows) = real_array(obj, name, 2, self.dim, "a row per particle, D")?;
@@ -430,6 +734,32 @@ impl ParticleRattle {
             )));
         }
         Ok((flat, rows))
+    }
+
+    /// A (members, n, D) array, one flat (n·D) vector per member.
+    fn members(&self, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Vec<f64>>> {
+        let (n, d) = (self.particles, self.dim);
+        let np = obj.py().import("numpy")?;
+        let shape: Vec<usize> = np
+            .call_method1("shape", (obj,))
+            .and_then(|s| s.extract())
+            .map_err(|e| {
+                InvalidInputError::new_err(format!(
+                    "{name} must be an array of real numbers of shape (members, {n}, {d}): {}",
+                    e.value(obj.py())
+                ))
+            })?;
+        if shape.len() != 3 || shape[1] != n || shape[2] != d {
+            return Err(InvalidInputError::new_err(format!(
+                "{name} must have shape (members, {n}, {d}): a state of n = {n} particles in \
+                 R^{d} per member, not {shape:?}"
+            )));
+        }
+        let (flat, _) = real_array(obj, name, 3, d, "D")?;
+        let size = n * d;
+        Ok((0..shape[0])
+            .map(|i| flat[i * size..(i + 1) * size].to_vec())
+            .collect())
     }
 
     fn state(&self, q: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<ParticleState> {
@@ -446,9 +776,9 @@ impl ParticleRattle {
         (q.into_pyarray(py), p.into_pyarray(py))
     }
 
-    /// The run's frames as arrays, and its error (if any) as the package's
-    /// exception instance.
-    fn frames(&self, py: Python<'_>, out: &RunOutcome) -> ParticleRun {
+    /// The run's frames as arrays, with `error`, the exception of its
+    /// error (if any).
+    fn frames(&self, py: Python<'_>, out: &RunOutcome, error: Option<PyErr>) -> ParticleRun {
         let t = &out.trajectory;
         let n = t.len();
         let shape = (n, self.particles, self.dim);
@@ -471,10 +801,7 @@ impl ParticleRattle {
                 .unbind(),
             time: Array1::from(t.times()).into_pyarray(py).unbind(),
             step: Array1::from(t.steps()).into_pyarray(py).unbind(),
-            error: out
-                .error
-                .as_ref()
-                .map(|e| error(py, e).value(py).clone().into_any().unbind()),
+            error: error.map(|e| e.value(py).clone().into_any().unbind()),
         }
     }
 }

@@ -25,7 +25,10 @@ draws=1000)`` returns the draws as arrays of shape (chains, draws, d).
 
 Particle systems (molecular dynamics: constraint families over run-time
 tables) are declared with ``geoshake.declare_particles(source)`` and run on
-arrays of shape (n, D) by ``.system(masses, {table: rows}, h)``.
+arrays of shape (n, D) by ``.system(masses, {table: rows}, h)``, with
+forces from a Python callable (``forces=``), a Langevin thermostat
+(``thermostat=geoshake.Langevin(friction, kT, seed)``), the constraint
+forces and virial of a step, and ensembles of states run in parallel.
 
 Every failure is a subclass of :class:`ShakeError`; a failed run's error
 carries ``step``, ``time``, ``residual`` and the partial trajectory.
@@ -34,10 +37,12 @@ carries ``step``, ``time``, ``residual`` and the partial trajectory.
 from ._geoshake import (
     Bonds,
     ComponentJumpError,
+    ConstraintForces,
     DeclarationError,
     DeclaredParticles,
     FibreJumpError,
     InvalidInputError,
+    Langevin,
     NewtonError,
     NondegeneracyError,
     NonFiniteError,
@@ -61,10 +66,12 @@ from . import models
 __all__ = [
     "Bonds",
     "ComponentJumpError",
+    "ConstraintForces",
     "DeclarationError",
     "DeclaredParticles",
     "FibreJumpError",
     "InvalidInputError",
+    "Langevin",
     "NewtonError",
     "NondegeneracyError",
     "NonFiniteError",

@@ -1,10 +1,12 @@
 from ._geoshake import (
     Bonds as Bonds,
     ComponentJumpError as ComponentJumpError,
+    ConstraintForces as ConstraintForces,
     DeclarationError as DeclarationError,
     DeclaredParticles as DeclaredParticles,
     FibreJumpError as FibreJumpError,
     InvalidInputError as InvalidInputError,
+    Langevin as Langevin,
     NewtonError as NewtonError,
     NondegeneracyError as NondegeneracyError,
     NonFiniteError as NonFiniteError,

@@ -1,6 +1,6 @@
 """Type stubs of the Rust extension ``geoshake._geoshake``."""
 
-from typing import Any, Literal, Optional, TypedDict, Union
+from typing import Any, Callable, Literal, Optional, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -122,7 +122,40 @@ class DeclaredParticles:
         method: Method = "rattle",
         tolerance: Optional[float] = None,
         max_iterations: Optional[int] = None,
+        forces: Optional[Forces] = None,
+        thermostat: Optional[Langevin] = None,
     ) -> ParticleRattle: ...
+
+Forces = Callable[[npt.NDArray[np.float64]], tuple[float, npt.ArrayLike]]
+"""``forces(q) -> (V, F)``: q of shape (n, D), V = V_ext(q), F = −∇V_ext(q)
+of shape (n, D)."""
+
+class Langevin:
+    """A Langevin thermostat, dp = −∇V dt − γ p dt + √(2 γ k_B T) M^{1/2} dW,
+    integrated by g-BAOAB with RATTLE's drifts (``substeps`` per drift)."""
+
+    def __init__(
+        self, friction: float, kT: float, seed: Optional[int] = None, *, substeps: Optional[int] = None
+    ) -> None: ...
+    @property
+    def friction(self) -> float: ...
+    @property
+    def kT(self) -> float: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def substeps(self) -> int: ...
+    def member(self, i: int) -> Langevin: ...
+
+class ConstraintForces:
+    """The constraint forces f_c = −Σ_k Λ_k ∇g_k(q0) of the step that made
+    a state (acting at its start q0, at ``time``), their multipliers Λ and
+    their virial W = Σ_a x_a ⊗ f_{c,a}."""
+
+    forces: npt.NDArray[np.float64]
+    virial: npt.NDArray[np.float64]
+    multipliers: npt.NDArray[np.float64]
+    time: float
 
 class ParticleRun:
     """A particle run: q and p of shape (frames, n, D), time and step of
@@ -132,7 +165,8 @@ class ParticleRun:
     p: npt.NDArray[np.float64]
     time: npt.NDArray[np.float64]
     step: npt.NDArray[np.uint64]
-    error: Optional[ShakeError]
+    error: Optional[BaseException]
+    """None, a ``ShakeError``, or the exception the forces callable raised."""
     def __len__(self) -> int: ...
 
 class ParticleRattle:
@@ -153,7 +187,20 @@ class ParticleRattle:
         stride: int = 1,
         t0: float = 0.0,
     ) -> ParticleRun: ...
+    def ensemble(
+        self,
+        qs: npt.ArrayLike,
+        ps: npt.ArrayLike,
+        steps: int,
+        *,
+        stride: int = 1,
+        t0: float = 0.0,
+    ) -> list[ParticleRun]: ...
     def kinetic_energy(self, p: npt.ArrayLike) -> float: ...
+    def potential_energy(self, q: npt.ArrayLike) -> float: ...
+    def constraint_forces(self, q: npt.ArrayLike, p: npt.ArrayLike) -> ConstraintForces: ...
+    @property
+    def thermostat(self) -> Optional[Langevin]: ...
     @property
     def particles(self) -> int: ...
     @property

@@ -1,0 +1,153 @@
+//! `geoshake.Langevin`: the particle path's Langevin thermostat (g-BAOAB,
+//! `geoshake::runtime::particles::Langevin`) as a value given to
+//! `DeclaredParticles.system(..., thermostat=)`.
+
+use geoshake::runtime::particles::Langevin as Thermostat;
+use pyo3::prelude::*;
+
+use crate::bonds::error;
+use crate::forces::type_name;
+use crate::InvalidInputError;
+
+/// The increment between members' seeds: SplitMix64's, the odd integer
+/// nearest 2⁶⁴/φ, so that the seeds s, s + γ, s + 2γ, … of an ensemble's
+/// members differ in many bits and the noise hashed from them is
+/// independent (the noise of step k hashes the seed with k: members whose
+/// seeds were s, s + 1, … would differ in the last bits only).
+const MEMBER_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
+
+/// A Langevin thermostat for the particle path:
+///
+///   dp = −∇V dt − γ p dt + √(2 γ k_B T) M^{1/2} dW
+///
+/// on the constraint manifold, integrated by BAOAB with RATTLE's drifts
+/// (g-BAOAB with `substeps` K > 1: each drift is K RATTLE substeps of the
+/// free flow), so that (q, p) samples exp(−H / k_B T) restricted to T*M.
+///
+/// `friction` γ ≥ 0 is per unit of time (γ = 0: Hamiltonian flow split
+/// into kicks and drifts), `kT` = k_B T ≥ 0 is in the units of H (for Å,
+/// fs and g/mol, k_B T = 0.0019872 · T / 418.4 in g/mol·Å²/fs²), `seed`
+/// a whole number in [0, 2⁶⁴) and `substeps` K in 1..=2²⁰. The noise of
+/// step k is a function of the seed, k and the coordinate only, so a run
+/// is reproducible bit for bit. Anything else raises `InvalidInputError`.
+#[pyclass(frozen, module = "geoshake", name = "Langevin")]
+#[derive(Clone)]
+pub(crate) struct Langevin {
+    pub(crate) inner: Thermostat,
+}
+
+/// `obj` as a float, or `InvalidInputError` naming the argument.
+fn real(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
+    obj.extract().map_err(|_| {
+        InvalidInputError::new_err(format!(
+            "{name} must be a real number, not {}",
+            type_name(obj)
+        ))
+    })
+}
+
+/// `obj` as a whole number in [0, 2⁶⁴) (`range`, for the message: the
+/// caller's own bounds), or `InvalidInputError`.
+fn whole(obj: &Bound<'_, PyAny>, name: &str, range: &str) -> PyResult<u64> {
+    obj.extract::<u64>().map_err(|_| {
+        InvalidInputError::new_err(format!(
+            "{name} must be a whole number in {range}, not {}",
+            obj.repr()
+                .map_or_else(|_| type_name(obj), |r| r.to_string())
+        ))
+    })
+}
+
+#[pymethods]
+impl Langevin {
+    #[new]
+    #[pyo3(signature = (friction, kT, seed=None, *, substeps=None))]
+    #[allow(non_snake_case)]
+    fn new(
+        py: Python<'_>,
+        friction: &Bound<'_, PyAny>,
+        kT: &Bound<'_, PyAny>,
+        seed: Option<&Bound<'_, PyAny>>,
+        substeps: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let gamma = real(friction, "friction")?;
+        let kt = real(kT, "kT")?;
+        let seed = match seed {
+            Some(s) => whole(s, "seed", "[0, 2⁶⁴)")?,
+            None => 0,
+        };
+        let substeps = match substeps {
+            // (Beyond usize, the runtime's own refusal of a K too large.)
+            Some(k) => usize::try_from(whole(k, "substeps", "1..=2²⁰")?).unwrap_or(usize::MAX),
+            None => 1,
+        };
+        let inner = Thermostat::new(gamma, kt, seed)
+            .and_then(|t| t.geodesic(substeps))
+            .map_err(|e| error(py, &e))?;
+        Ok(Langevin { inner })
+    }
+
+    /// γ, per unit of time.
+    #[getter]
+    fn friction(&self) -> f64 {
+        self.inner.friction()
+    }
+
+    /// k_B T, in the units of H.
+    #[getter]
+    #[allow(non_snake_case)]
+    fn kT(&self) -> f64 {
+        self.inner.kt()
+    }
+
+    /// The noise's seed.
+    #[getter]
+    fn seed(&self) -> u64 {
+        self.inner.seed()
+    }
+
+    /// K, the RATTLE substeps of each drift.
+    #[getter]
+    fn substeps(&self) -> usize {
+        self.inner.substeps()
+    }
+
+    /// The thermostat of member `i` of an ensemble: the same friction, k_B T
+    /// and substeps, with the seed s + i·0x9E3779B97F4A7C15 (mod 2⁶⁴).
+    /// `member(0)` is this thermostat; member i of `ParticleRattle.ensemble`
+    /// runs the steps of `run` on a system given `member(i)`.
+    fn member(&self, i: &Bound<'_, PyAny>) -> PyResult<Langevin> {
+        let i = whole(i, "the member", "[0, 2⁶⁴)")?;
+        Ok(self.for_member(i))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "geoshake.Langevin(friction={}, kT={}, seed={}, substeps={})",
+            self.friction(),
+            self.kT(),
+            self.seed(),
+            self.substeps()
+        )
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other
+            .cast::<Langevin>()
+            .is_ok_and(|o| o.get().inner == self.inner)
+    }
+}
+
+impl Langevin {
+    /// Member i's thermostat (see `member`).
+    pub(crate) fn for_member(&self, i: u64) -> Langevin {
+        let seed = self
+            .inner
+            .seed()
+            .wrapping_add(i.wrapping_mul(MEMBER_STRIDE));
+        let inner = Thermostat::new(self.inner.friction(), self.inner.kt(), seed)
+            .and_then(|t| t.geodesic(self.inner.substeps()))
+            .expect("the parameters of a thermostat already made");
+        Langevin { inner }
+    }
+}
