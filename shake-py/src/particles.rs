@@ -716,9 +716,10 @@ impl ParticleRattle {
                              callable to use)",
                         ));
                     }
-                    // (The holder may be waiting for the interpreter to call
-                    // its forces callable.)
-                    py.detach(std::thread::yield_now);
+                    // (Without the interpreter: the holder may be waiting
+                    // for it to call its forces callable. A short sleep,
+                    // not a spin: the holder may run for minutes.)
+                    py.detach(|| std::thread::sleep(std::time::Duration::from_micros(200)));
                 }
             }
         }

@@ -123,7 +123,7 @@ impl Langevin {
 
     fn __repr__(&self) -> String {
         format!(
-            "geoshake.Langevin(friction={}, kT={}, seed={}, substeps={})",
+            "geoshake.Langevin(friction={:?}, kT={:?}, seed={}, substeps={})",
             self.friction(),
             self.kT(),
             self.seed(),

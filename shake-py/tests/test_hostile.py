@@ -20,7 +20,12 @@ not depend on the ones before it):
   ``project_momenta`` on arrays that are NaN, far, of the wrong shape,
   dtype or layout;
 - ``geoshake.ase.FixBondLengths`` (when ASE is installed): the same
-  through ASE's ``Atoms`` and the constraint's ``adjust_*`` calls.
+  through ASE's ``Atoms`` and the constraint's ``adjust_*`` calls;
+- ``particles``: rigid dimers from ``declare_particles`` with a forces
+  callable that raises, returns NaN or the wrong shape or type, or calls
+  back into its own system, a thermostat hostile or of the wrong type,
+  then ``step``, ``run``, ``ensemble``, ``potential_energy`` and
+  ``constraint_forces`` on hostile arrays.
 
 Verdicts: ok, typed (a ``ShakeError``, or a conversion error of a scalar
 drawn with the wrong type), silent (a result that is not finite, off M,
@@ -526,7 +531,157 @@ def case_ase(d):
         bonds_hidden(np.asarray(c.pairs).reshape(-1, 2).astype(int), masses, q, p, given)
 
 
-KINDS = {"declare": case_declare, "run": case_run, "bonds": case_bonds, "ase": case_ase}
+DIMERS = """struct Dimers {
+    particles x[3];
+    constraints { bond[k in bonds(a, b; length)]: norm2(x[a] - x[b]) - length^2 }
+}"""
+
+
+class UserForceError(Exception):
+    """What a hostile forces callable raises on purpose."""
+
+
+def hostile_forces(d, n):
+    """A forces callable for n particles: a harmonic trap, or (from a
+    random call on) one that raises, returns NaN or ∞, the wrong shape,
+    type or dtype, or calls back into the system it belongs to; or no
+    callable at all. Returns (forces, how)."""
+    rng = d.rng
+    k = float(rng.uniform(0.1, 2.0))
+    how = d.pick(["trap"] * 8 + ["raise", "nan", "inf", "shape", "flat", "triple", "list",
+                                 "strings", "object", "none", "complex", "reenter"])
+    after = int(rng.integers(1, 6))
+    calls = [0]
+    owner = {}
+
+    def forces(q):
+        calls[0] += 1
+        if how == "trap" or calls[0] < after:
+            return 0.5 * k * float(np.sum(q * q)), -k * q
+        if how == "raise":
+            raise UserForceError("deliberate")
+        if how == "reenter":
+            owner["system"].step(q, q)
+        return {
+            "nan": lambda: (0.0, np.full_like(q, math.nan)),
+            "inf": lambda: (math.inf, -k * q),
+            "shape": lambda: (0.0, -k * q[:-1]),
+            "flat": lambda: (0.0, (-k * q).ravel()),
+            "triple": lambda: (0.0, -k * q, 1),
+            "list": lambda: [0.0, -k * q],
+            "strings": lambda: ("V", "F"),
+            "object": lambda: object(),
+            "none": lambda: None,
+            "complex": lambda: (0.0, -k * q + 0j),
+            "reenter": lambda: (0.0, -k * q),
+        }[how]()
+
+    if d.chance(0.04):
+        return d.pick([3.0, "trap", np.zeros((n, 3))]), "noncallable"
+    return forces, how, owner
+
+
+def particles_on_m(q, bonds, tol=1e-8):
+    q = np.asarray(q)
+    if not np.all(np.isfinite(q)):
+        raise Silent("non-finite positions in a result")
+    a, b = bonds[:, 0].astype(int), bonds[:, 1].astype(int)
+    r = np.linalg.norm(q[..., a, :] - q[..., b, :], axis=-1)
+    if r.size and not np.abs(r - 1.0).max() <= tol:
+        raise Silent(f"a bond off by {np.abs(r - 1.0).max():.2e}")
+
+
+def case_particles(d):
+    """Rigid dimers (and maybe a free particle) declared from a string,
+    with a hostile forces callable, thermostat, step size and method, then
+    one of step, run, ensemble, potential_energy and constraint_forces on
+    arrays that may be NaN, far, or of the wrong shape, dtype or count.
+    The callable's own UserForceError is a deserved refusal."""
+    import geoshake
+
+    rng = d.rng
+    count = int(rng.integers(1, 4))
+    n = 2 * count + int(rng.integers(0, 2))
+    masses = rng.uniform(1.0, 4.0, size=n)
+    if d.chance(0.05):
+        masses[rng.integers(n)] = hostile_float(rng, 1.0, 4.0)
+    bonds = np.array([[2 * i, 2 * i + 1, 1.0] for i in range(count)])
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    q = np.repeat(3.0 * np.arange(n // 2 + 1), 2)[:n, None] * np.array([1.0, 0, 0])
+    q[1::2] = q[0::2][: n // 2] + u[: n // 2]
+    p = rng.normal(size=(n, 3))
+    kw = {"method": d.pick(["rattle"] * 4 + ["shake"])}
+    how, owner = "trap", {}
+    if d.chance(0.7):
+        forces = hostile_forces(d, n)
+        kw["forces"], how = forces[0], forces[1]
+        owner = forces[2] if len(forces) > 2 else {}
+    if d.chance(0.4):
+        if d.chance(0.05):
+            kw["thermostat"] = d.pick(["langevin", 1.0, {"friction": 1.0}])
+        else:
+            kw["thermostat"] = geoshake.Langevin(
+                d.scalar(lambda: float(rng.uniform(0.0, 2.0))),
+                d.scalar(lambda: float(rng.uniform(0.0, 2.0))),
+                seed=d.scalar(lambda: int(rng.integers(0, 2**63)), ints=True),
+                substeps=d.scalar(lambda: int(rng.integers(1, 4)), ints=True),
+            )
+    h = d.scalar(lambda: float(rng.uniform(0.005, 0.05)))
+    try:
+        system = geoshake.declare_particles(DIMERS).system(masses, {"bonds": bonds}, h, **kw)
+        owner["system"] = system
+        q0, p0 = system.project(q, p)
+        particles_on_m(q0, bonds)
+        op = d.pick(["step", "run", "ensemble", "potential", "forces"])
+        v = rng.random()
+        if v < 0.08:
+            q0 = q0.copy()
+            q0.flat[rng.integers(q0.size)] = math.nan
+        elif v < 0.12:
+            q0 = q0[:-1]
+        elif v < 0.15:
+            q0 = q0.astype(complex)
+        elif v < 0.18:
+            p0 = p0 * 1e200
+        if op == "step":
+            q1, p1 = system.step(q0, p0)
+            particles_on_m(q1, bonds)
+            if d.chance(0.5):
+                fc = system.constraint_forces(q1, p1)
+                if not np.all(np.isfinite(fc.virial)):
+                    raise Silent("non-finite virial")
+        elif op == "run":
+            run = system.run(q0, p0, int(rng.integers(0, 30)), stride=int(rng.integers(1, 4)))
+            if len(run):
+                particles_on_m(run.q, bonds)
+            if run.error is not None and not isinstance(run.error, (geoshake.ShakeError, UserForceError)):
+                raise Silent(f"run.error is {type(run.error).__name__}")
+        elif op == "ensemble":
+            k = int(rng.integers(0, 4))
+            qs, ps = np.stack([q0] * k) if k else np.zeros((0,) + np.shape(q0)), np.stack([p0] * k) if k else np.zeros((0, n, 3))
+            if d.chance(0.1):
+                ps = ps[:-1]
+            if d.chance(0.05):
+                qs = [q0, q0[:-1]]
+            for run in system.ensemble(qs, ps, int(rng.integers(0, 20))):
+                if len(run):
+                    particles_on_m(run.q, bonds)
+                if run.error is not None and not isinstance(run.error, (geoshake.ShakeError, UserForceError)):
+                    raise Silent(f"member error is {type(run.error).__name__}")
+        elif op == "potential":
+            if not np.isfinite(system.potential_energy(q0)) and how == "trap":
+                raise Silent("V of a trap not finite")
+        else:
+            system.constraint_forces(q0, p0)
+    except UserForceError:
+        if how != "raise":
+            raise Silent("UserForceError from a callable that does not raise it")
+        return "ok"
+
+
+KINDS = {"declare": case_declare, "run": case_run, "bonds": case_bonds, "ase": case_ase,
+         "particles": case_particles}
 
 
 def verdict(kind, seed, i):
