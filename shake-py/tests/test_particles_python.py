@@ -538,3 +538,22 @@ def test_hostile_members(free_dimers):
     with pytest.raises(geoshake.InvalidInputError):
         rattle.potential_energy(np.full((4, 3), "x"))
     assert rattle.potential_energy(q0) == 0.0
+
+
+def test_the_guide_s_example_runs():
+    """docs/guide/python.md's example of this section, as written."""
+    import pathlib
+
+    guide = pathlib.Path(__file__).resolve().parents[2] / "docs" / "guide" / "python.md"
+    if not guide.exists():
+        pytest.skip("the guide is not beside the tests")
+    text = guide.read_text()
+    section = text.index("### Forces, thermostat, virial and ensembles")
+    start = text.index("```python\n", section) + len("```python\n")
+    code = text[start : text.index("```", start)]
+    names = {}
+    exec(compile(code, str(guide), "exec"), names)
+    assert names["fc"].virial.shape == (3, 3)
+    runs = names["runs"]
+    assert len(runs) == 8 and all(r.error is None and r.q.shape == (101, 4, 3) for r in runs)
+    assert np.abs(runs[0].p[-1] - runs[1].p[-1]).max() > 0.1
