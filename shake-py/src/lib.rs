@@ -627,10 +627,10 @@ fn real_array(
     let dtype = a.getattr("dtype")?;
     let kind: String = dtype.getattr("kind")?.extract()?;
     let shape: Vec<usize> = a.getattr("shape")?.extract()?;
-    let want = if ndim == 1 {
-        format!("({len},)")
-    } else {
-        format!("(k, {len})")
+    let want = match ndim {
+        1 => format!("({len},)"),
+        2 => format!("(k, {len})"),
+        _ => format!("(…, {len})"),
     };
     if !matches!(kind.as_str(), "f" | "i" | "u") {
         return Err(InvalidInputError::new_err(format!(

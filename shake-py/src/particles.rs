@@ -384,7 +384,8 @@ pub(crate) struct ParticleRun {
     /// Step indices, shape (frames,).
     #[pyo3(get)]
     step: Py<PyArray1<u64>>,
-    /// None, or the `ShakeError` (a subclass) of the step that failed.
+    /// None, or the `ShakeError` (a subclass) of the step that failed, or
+    /// the exception the forces callable raised in it.
     #[pyo3(get)]
     error: Option<Py<PyAny>>,
 }

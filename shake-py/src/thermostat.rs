@@ -25,8 +25,9 @@ const MEMBER_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
 /// free flow), so that (q, p) samples exp(−H / k_B T) restricted to T*M.
 ///
 /// `friction` γ ≥ 0 is per unit of time (γ = 0: Hamiltonian flow split
-/// into kicks and drifts), `kT` = k_B T ≥ 0 is in the units of H (for Å,
-/// fs and g/mol, k_B T = 0.0019872 · T / 418.4 in g/mol·Å²/fs²), `seed`
+/// into kicks and drifts), `kT` = k_B T ≥ 0 is in the units of H (for
+/// masses in g/mol, lengths in Å and times in fs, as LAMMPS' `real` units:
+/// k_B T = 0.0019872067 · T / 48.88821291², T in kelvin), `seed`
 /// a whole number in [0, 2⁶⁴) and `substeps` K in 1..=2²⁰. The noise of
 /// step k is a function of the seed, k and the coordinate only, so a run
 /// is reproducible bit for bit. Anything else raises `InvalidInputError`.
