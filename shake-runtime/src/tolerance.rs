@@ -317,6 +317,24 @@ fn max_abs_of(v: &[f64]) -> f64 {
 /// and a NaN one.
 #[inline(always)]
 pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
+    let ab = a * b;
+    // The common case in four comparisons: a, b ≥ MIN_POSITIVE (so
+    // neither is NaN) and a·b normal and finite, which makes a and b
+    // finite too (either infinite would make a·b infinite): every test
+    // below passes, and the one root is taken.
+    if a >= f64::MIN_POSITIVE
+        && b >= f64::MIN_POSITIVE
+        && ab >= f64::MIN_POSITIVE
+        && ab < f64::INFINITY
+    {
+        return 1.0 / ab.sqrt();
+    }
+    inverse_scale_apart(a, b)
+}
+
+/// [`inverse_scale`] outside its common case.
+#[cold]
+fn inverse_scale_apart(a: f64, b: f64) -> f64 {
     let resolved = |x: f64| (f64::MIN_POSITIVE..f64::INFINITY).contains(&x);
     if !(resolved(a) && resolved(b)) {
         return f64::INFINITY;
