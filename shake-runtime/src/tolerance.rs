@@ -324,8 +324,7 @@ pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
     // below passes, and the one root is taken.
     if a >= f64::MIN_POSITIVE
         && b >= f64::MIN_POSITIVE
-        && ab >= f64::MIN_POSITIVE
-        && ab < f64::INFINITY
+        && (f64::MIN_POSITIVE..f64::INFINITY).contains(&ab)
     {
         return 1.0 / ab.sqrt();
     }
