@@ -220,6 +220,7 @@ pub(crate) fn g_within_roundoff(
 /// tolerance looser than round-off allows. Unlike the constraint
 /// tolerance, this does not depend on how far from M the run's initial
 /// data was allowed to be.
+#[inline]
 pub(crate) fn step_bound(newton_tolerance: f64, size: f64, scale: f64) -> f64 {
     (64.0 * f64::EPSILON).max(newton_tolerance) * size * scale
 }
@@ -267,22 +268,31 @@ pub(crate) fn worst_constraint_by(
 /// ‖(q, p)‖∞, NaN-propagating.
 #[inline]
 pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
-    if q.len() + p.len() <= 8 {
-        // (A few entries: one pass, no lanes to set up.)
-        let mut m = 0.0f64;
-        for x in q.iter().chain(p) {
-            if x.is_nan() {
-                return f64::NAN;
-            }
-            m = m.max(x.abs());
-        }
-        return m;
-    }
-    let nan = q.iter().chain(p).fold(false, |n, x| n | x.is_nan());
-    if nan {
+    let (mq, mp) = (max_abs_of(q), max_abs_of(p));
+    if mq.is_nan() || mp.is_nan() {
         return f64::NAN;
     }
-    norm_inf(q).max(norm_inf(p))
+    mq.max(mp)
+}
+
+/// ‖v‖∞, NaN-propagating. Each slice apart: the callers pass one half of
+/// the state and an empty slice, whose loop then vanishes, where a chain
+/// of the two kept its state from entry to entry.
+#[inline(always)]
+fn max_abs_of(v: &[f64]) -> f64 {
+    if v.len() <= 8 {
+        // (A few entries: one pass, no lanes to set up, no early exit.)
+        let (mut m, mut nan) = (0.0f64, false);
+        for x in v {
+            nan |= x.is_nan();
+            m = m.max(x.abs());
+        }
+        return if nan { f64::NAN } else { m };
+    }
+    if v.iter().fold(false, |n, x| n | x.is_nan()) {
+        return f64::NAN;
+    }
+    norm_inf(v)
 }
 
 /// 1 / (√a · √b): the reciprocal of a particle constraint's scale from the
@@ -307,6 +317,23 @@ pub(crate) fn max_abs(q: &[f64], p: &[f64]) -> f64 {
 /// and a NaN one.
 #[inline(always)]
 pub(crate) fn inverse_scale(a: f64, b: f64) -> f64 {
+    let ab = a * b;
+    // The common case in four comparisons: a, b ≥ MIN_POSITIVE (so
+    // neither is NaN) and a·b normal and finite, which makes a and b
+    // finite too (either infinite would make a·b infinite): every test
+    // below passes, and the one root is taken.
+    if a >= f64::MIN_POSITIVE
+        && b >= f64::MIN_POSITIVE
+        && (f64::MIN_POSITIVE..f64::INFINITY).contains(&ab)
+    {
+        return 1.0 / ab.sqrt();
+    }
+    inverse_scale_apart(a, b)
+}
+
+/// [`inverse_scale`] outside its common case.
+#[cold]
+fn inverse_scale_apart(a: f64, b: f64) -> f64 {
     let resolved = |x: f64| (f64::MIN_POSITIVE..f64::INFINITY).contains(&x);
     if !(resolved(a) && resolved(b)) {
         return f64::INFINITY;

@@ -328,9 +328,13 @@ impl Guard {
     ) -> Result<(), StepError> {
         let tol = self.options.newton.step_tolerance;
         let (qmax, pmax) = scales;
-        let within = g.iter().zip(sizes).zip(reads).all(|((gi, si), &r)| {
-            let scale = crate::tolerance::variable_scale(r, qmax, pmax);
-            gi.abs() <= crate::tolerance::step_bound(tol, *si, scale)
+        // Indexed over one length: for the fixed-size step's one
+        // constraint the loop is a single test, where a zip of three
+        // slices (one of run-time length) stayed a loop.
+        let n = g.len().min(sizes.len()).min(reads.len());
+        let within = (0..n).all(|i| {
+            let scale = crate::tolerance::variable_scale(reads[i], qmax, pmax);
+            g[i].abs() <= crate::tolerance::step_bound(tol, sizes[i], scale)
         });
         if within {
             return Ok(());

@@ -233,19 +233,7 @@ impl Global {
                 let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
                 fam.values(qn, &mut self.g[c0..c1]);
             }
-            let mut worst = 0.0f64;
-            let mut worst_c = 0;
-            for (c, (&g, &s)) in self.g.iter().zip(&self.scale0).enumerate() {
-                // |g| / scale, not g² / scale²: squares underflow at length
-                // scales below ~1e-77 and Newton would "converge" at once.
-                // Below ~1e-150 the scale is ∞ (`inverse_scale`): not
-                // judged, a non-finite residual.
-                let r = g.abs() * s;
-                if crate::tolerance::worse(r, worst) {
-                    worst = r;
-                    worst_c = c;
-                }
-            }
+            let worst = largest_relative(&self.g, &self.scale0);
             if worst <= args.tol {
                 report.residual = Some(worst);
                 report.shake_iterations = it;
@@ -281,6 +269,7 @@ impl Global {
                 }),
             };
             if let Some(source) = source {
+                let worst_c = where_largest(&self.g, &self.scale0, worst);
                 return Err(num.error_at(system, worst_c, stage, k, time, source));
             }
             // g is re-evaluated next iteration: solve in its buffer.
@@ -478,4 +467,40 @@ impl Global {
         }
         worst
     }
+}
+
+/// The largest relative residual |g_c| · scale_c over the constraints (0
+/// for none), NaN if any is: |g| / scale, not g² / scale², since squares
+/// underflow at length scales below ~1e-77 and Newton would "converge" at
+/// once; below ~1e-150 the scale is ∞ (`inverse_scale`), not judged, a
+/// non-finite residual. A max and a flag, which vectorise: which
+/// constraint it is, only a failure asks ([`where_largest`]).
+#[inline]
+fn largest_relative(g: &[f64], scale: &[f64]) -> f64 {
+    let (mut worst, mut nan) = (0.0f64, false);
+    for (&g, &s) in g.iter().zip(scale) {
+        let r = g.abs() * s;
+        nan |= r.is_nan();
+        worst = worst.max(r);
+    }
+    if nan {
+        f64::NAN
+    } else {
+        worst
+    }
+}
+
+/// The constraint [`largest_relative`] found `worst` at: the first NaN,
+/// else the first at that value (as a running maximum over the
+/// constraints in order, `tolerance::worse`, would keep it).
+#[cold]
+fn where_largest(g: &[f64], scale: &[f64], worst: f64) -> usize {
+    let r = |(&g, &s): (&f64, &f64)| g.abs() * s;
+    let mut rs = g.iter().zip(scale).map(r);
+    let found = if worst.is_nan() {
+        rs.position(|r| r.is_nan())
+    } else {
+        rs.position(|r| r == worst)
+    };
+    found.unwrap_or(0)
 }

@@ -45,6 +45,10 @@ impl Rattle {
             let n = PARALLEL_PARTICLES;
             let chunk = |(k, c): (usize, &[f64])| c.iter().position(bad).map(|e| k * n + e);
             v.par_chunks(n).enumerate().find_map_first(chunk)
+        } else if crate::linalg::all_finite(v) {
+            // (The common case in one pass without an exit per entry,
+            // which vectorises; the entry is looked for only on failure.)
+            None
         } else {
             v.iter().position(bad)
         };

@@ -86,13 +86,18 @@ impl Rattle {
         let inv_m = self.system.inverse_masses();
         let kick = self.has_potential;
         // p̃ and q̃ particle by particle, in chunks on threads when large.
+        // (Each particle's d entries sliced once and zipped: indexed one
+        // by one, every access was bounds-checked.)
         let drift = |(((qn, pn), (q, p)), (f, w)): Chunk<'_>| {
             for (a, &wa) in w.iter().enumerate() {
                 let w = h * wa;
-                for c in a * d..(a + 1) * d {
-                    let pt = if kick { p[c] - half * f[c] } else { p[c] };
-                    pn[c] = pt;
-                    qn[c] = q[c] + w * pt;
+                let r = a * d..(a + 1) * d;
+                let (qn, pn) = (&mut qn[r.clone()], &mut pn[r.clone()]);
+                let (q, p, f) = (&q[r.clone()], &p[r.clone()], &f[r]);
+                for ((qn, pn), ((q, p), f)) in qn.iter_mut().zip(pn).zip(q.iter().zip(p).zip(f)) {
+                    let pt = if kick { p - half * f } else { *p };
+                    *pn = pt;
+                    *qn = q + w * pt;
                 }
             }
         };

@@ -87,8 +87,17 @@ use crate::system::{ConstrainedSystem, ConstraintKind};
 /// The frozen Jacobian's horizon (`newton`, "Cheap Jacobians"): its
 /// contraction must reach the tolerance within this many updates, or it
 /// is evaluated afresh. A refresh costs about one residual here (g_q at
-/// q1 and one product with A G0ᵀ).
+/// q1 and one product with A G0ᵀ) while m is at most
+/// [`CHEAP_REFRESH_M`].
 pub(crate) const REFRESH_HORIZON: i32 = 3;
+
+/// The most constraints for which a refresh of SHAKE's Jacobian costs
+/// about an update (`REFRESH_HORIZON`): the sizes the fixed-size kernels
+/// take, whose Jacobian is a few numbers. Beyond, a refresh forms the
+/// banded product over m rows and factorises it, the cost of two to three
+/// updates, more than the updates it saves at the step sizes a run takes:
+/// the frozen Jacobian is kept while it quarters.
+pub(crate) const CHEAP_REFRESH_M: usize = 8;
 
 /// The kick fractions (a, b) of the base map when the classical path
 /// applies to `S`, else `None`.
@@ -351,7 +360,10 @@ pub(crate) fn shake_step<S: ConstrainedSystem>(
     residual(sys, h, ws, true);
     let mut report = ShakeReport::default();
     let diagonal = ws.jac_band.lower == 0 && ws.jac_band.upper == 0;
-    let mut mon = Monitor::new(*opts).refresh_beyond(REFRESH_HORIZON);
+    let mut mon = Monitor::new(*opts);
+    if m <= CHEAP_REFRESH_M {
+        mon = mon.refresh_beyond(REFRESH_HORIZON);
+    }
     let mut fresh = true;
     let mut need_jacobian = true;
     let mut r_first = 0.0;
