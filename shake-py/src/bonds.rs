@@ -12,7 +12,7 @@ use geoshake::{StepError, StepInfo};
 use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use crate::{typed_error, InvalidInputError};
+use crate::{refused, typed_error, InvalidInputError};
 
 /// Distance constraints |x_a − x_b| = l between atoms in R³ with masses:
 /// SHAKE's position stage and RATTLE's velocity stage on NumPy arrays of
@@ -50,10 +50,12 @@ fn positions<'py>(
             let converted = np
                 .call_method1("ascontiguousarray", (obj, "float64"))
                 .map_err(|e| {
-                    InvalidInputError::new_err(format!(
-                        "{name} must be an array of real numbers of shape ({atoms}, 3): {}",
-                        e.value(obj.py())
-                    ))
+                    refused(obj.py(), e, |e| {
+                        format!(
+                            "{name} must be an array of real numbers of shape ({atoms}, 3): {}",
+                            e.value(obj.py())
+                        )
+                    })
                 })?;
             let converted = converted.cast_into::<PyArray2<f64>>().map_err(|e| {
                 let ndim = e.into_inner().getattr("ndim");

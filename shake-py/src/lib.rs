@@ -599,6 +599,19 @@ fn plan(
     })
 }
 
+/// NumPy's refusal `e` of an argument as `InvalidInputError` with the
+/// message `says` makes of it, unless `e` is not an `Exception`: a
+/// `KeyboardInterrupt` (Ctrl-C, whose handler runs in whatever Python code
+/// NumPy was executing) or a `SystemExit` goes on as it is, never turned
+/// into a complaint about the input, nor lost.
+pub(crate) fn refused(py: Python<'_>, e: PyErr, says: impl FnOnce(&PyErr) -> String) -> PyErr {
+    if e.is_instance_of::<PyException>(py) {
+        InvalidInputError::new_err(says(&e))
+    } else {
+        e
+    }
+}
+
 /// A state's layout, for [`real_array`]'s messages.
 const Z: &str = "q then p, 2d";
 
@@ -619,10 +632,12 @@ fn real_array(
     // (A ragged list or an object NumPy cannot read raises ValueError or
     // TypeError there: the package's own error instead.)
     let a = np.call_method1("asarray", (obj,)).map_err(|e| {
-        InvalidInputError::new_err(format!(
-            "{name} must be an array of real numbers ({what} = {len}): {}",
-            e.value(obj.py())
-        ))
+        refused(obj.py(), e, |e| {
+            format!(
+                "{name} must be an array of real numbers ({what} = {len}): {}",
+                e.value(obj.py())
+            )
+        })
     })?;
     let dtype = a.getattr("dtype")?;
     let kind: String = dtype.getattr("kind")?.extract()?;

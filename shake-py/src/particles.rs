@@ -22,7 +22,7 @@ use pyo3::types::PyDict;
 use crate::bonds::{error, topology};
 use crate::forces::{self, type_name, PyForces};
 use crate::thermostat::Langevin;
-use crate::{declare_error, keyword_parameters, real_array, InvalidInputError};
+use crate::{declare_error, keyword_parameters, real_array, refused, InvalidInputError};
 
 /// Declares a particle system from a string in the grammar of
 /// `constrained_system!` (a `struct` with `particles x[D];` and families
@@ -285,10 +285,12 @@ fn vector(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
         .call_method1("shape", (obj,))
         .and_then(|s| s.extract())
         .map_err(|e| {
-            InvalidInputError::new_err(format!(
-                "{name} must be a 1-D array of real numbers: {}",
-                e.value(obj.py())
-            ))
+            refused(obj.py(), e, |e| {
+                format!(
+                    "{name} must be a 1-D array of real numbers: {}",
+                    e.value(obj.py())
+                )
+            })
         })?;
     if shape.len() != 1 {
         return Err(InvalidInputError::new_err(format!(
@@ -746,10 +748,12 @@ impl ParticleRattle {
             .call_method1("shape", (obj,))
             .and_then(|s| s.extract())
             .map_err(|e| {
-                InvalidInputError::new_err(format!(
-                    "{name} must be an array of real numbers of shape (members, {n}, {d}): {}",
-                    e.value(obj.py())
-                ))
+                refused(obj.py(), e, |e| {
+                    format!(
+                        "{name} must be an array of real numbers of shape (members, {n}, {d}): {}",
+                        e.value(obj.py())
+                    )
+                })
             })?;
         if shape.len() != 3 || shape[1] != n || shape[2] != d {
             return Err(InvalidInputError::new_err(format!(

@@ -10,11 +10,11 @@ use std::time::Duration;
 use geoshake::runtime::sampler::{self, Density, SamplerError, SamplerOptions, Samples};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::IntoPyArray;
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyException, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyInt};
 
-use crate::{real_array, typed_error, with_model, InvalidInputError, System};
+use crate::{real_array, refused, typed_error, with_model, InvalidInputError, System};
 
 /// The Python exception for a sampler's refusal: a start off M is the
 /// engine's error for it (`NotOnConstraintError`, `NonFiniteError`, ...,
@@ -104,12 +104,20 @@ pub(crate) fn sample<'py>(
         }
     };
     let d = system.dof();
-    let ndim: usize = q0
+    // (Anything np.ndim cannot read is refused by `real_array` below, with
+    // its message; but a Ctrl-C that arrives while np.ndim runs must stop
+    // the call here, not be dropped with the error and leave the chains to
+    // run their whole warm-up.)
+    let ndim: usize = match q0
         .py()
         .import("numpy")?
         .call_method1("ndim", (q0,))
         .and_then(|n| n.extract())
-        .unwrap_or(1);
+    {
+        Ok(n) => n,
+        Err(e) if e.is_instance_of::<PyException>(py) => 1,
+        Err(e) => return Err(e),
+    };
     let (flat, _) = real_array(q0, "q0", if ndim == 2 { 2 } else { 1 }, d, "q, d")?;
     let starts: Vec<&[f64]> = flat.chunks(d.max(1)).collect();
     let options = SamplerOptions {
@@ -263,7 +271,7 @@ fn chains_of(x: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<f64>>> {
         .import("numpy")?
         .call_method1("shape", (x,))
         .and_then(|s| s.extract())
-        .map_err(|e| InvalidInputError::new_err(format!("x must be an array: {e}")))?;
+        .map_err(|e| refused(x.py(), e, |e| format!("x must be an array: {e}")))?;
     if shape.len() != 2 {
         return Err(InvalidInputError::new_err(format!(
             "x must have shape (chains, draws), not {shape:?}"

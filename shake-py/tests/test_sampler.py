@@ -244,3 +244,24 @@ def test_ctrl_c_stops_a_long_run():
     with pytest.raises(KeyboardInterrupt):
         geoshake.sample(sphere, [0.0, 0.0, 1.0], draws=10, warmup=10**12)
     assert time.perf_counter() - start < 5.0
+
+
+class _CtrlCWhileRead:
+    """An argument whose reading by NumPy is where Ctrl-C lands."""
+
+    def __array__(self, dtype=None, copy=None):
+        raise KeyboardInterrupt
+
+
+def test_ctrl_c_while_the_arguments_are_read_stops_the_call():
+    # Ctrl-C's handler runs inside whatever Python code executes when the
+    # signal arrives, NumPy's reading of q0 included: the interrupt must
+    # come out as it is, not as a complaint about q0, and never be dropped
+    # (the chains would then run their whole warm-up).
+    sphere = geoshake.declare(SPHERE, kappa=1.0)
+    with pytest.raises(KeyboardInterrupt):
+        geoshake.sample(sphere, _CtrlCWhileRead(), draws=10, warmup=10**12)
+    with pytest.raises(KeyboardInterrupt):
+        geoshake.ess_bulk(_CtrlCWhileRead())
+    with pytest.raises(KeyboardInterrupt):
+        geoshake.run(sphere, _CtrlCWhileRead(), h=0.1, steps=10)
