@@ -325,8 +325,8 @@ use quote::quote;
 /// refused right after lowering, before anything is differentiated: such a
 /// system can never be coisotropic with an invertible N.
 ///
-/// (Each refusal's exact message is pinned by a trybuild case in the
-/// facade's `tests/ui/`; the examples below only show that it is refused.)
+/// (Each refusal's exact message is pinned by a trybuild case in
+/// `shake-ui/tests/ui/`; the examples below only show that it is refused.)
 /// A misspelt name, "did you mean `theta`?":
 ///
 /// ```compile_fail

@@ -1,7 +1,7 @@
 //! Declarations the macro must accept: each compiles here and its test runs
-//! what the declaration promises. They were trybuild `pass` cases; one such
-//! case made trybuild `cargo build` the whole dev-dependency tree in debug
-//! for its own project, where the refusals (`tests/ui/`, `ui::ui`) need only
+//! what the declaration promises. They are not trybuild `pass` cases: one
+//! such case makes trybuild `cargo build` its project's whole dependency
+//! tree in debug, where the refusals (`shake-ui/tests/ui/`) need only
 //! `cargo check`.
 
 mod arm_24_rotations {

@@ -150,7 +150,7 @@ fn declaration_of(ui: &str) -> String {
 #[test]
 fn refused_declarations_give_the_macro_message_at_its_place() {
     let mut seen = 0;
-    let mut files: Vec<_> = std::fs::read_dir("tests/ui")
+    let mut files: Vec<_> = std::fs::read_dir("shake-ui/tests/ui")
         .unwrap()
         .map(|e| e.unwrap().path())
         .filter(|p| p.extension().is_some_and(|e| e == "stderr"))

@@ -169,12 +169,12 @@ fn a_syntax_error_is_refused_at_its_position() {
     assert!(e.message.contains("unbalanced"), "{e}");
 }
 
-/// The ui test's declaration (tests/ui/NAME.rs) read at run time is refused
+/// The refusal case (shake-ui/tests/ui/NAME.rs) read at run time is refused
 /// with the first error of its expected compiler output (NAME.stderr), at
 /// the same line and column.
 fn refused_as_the_macro(name: &str) {
-    let rs = std::fs::read_to_string(format!("tests/ui/{name}.rs")).unwrap();
-    let stderr = std::fs::read_to_string(format!("tests/ui/{name}.stderr")).unwrap();
+    let rs = std::fs::read_to_string(format!("shake-ui/tests/ui/{name}.rs")).unwrap();
+    let stderr = std::fs::read_to_string(format!("shake-ui/tests/ui/{name}.stderr")).unwrap();
     // Everything outside the macro call blanked, lines kept, so positions
     // are the file's.
     let start = rs.find("constrained_system! {").unwrap() + "constrained_system! {".len();

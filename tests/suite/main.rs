@@ -73,5 +73,4 @@ mod runtime_symplectic;
 mod sampler;
 mod scale_invariance;
 mod trajectory_csv;
-mod ui;
 mod water_md;

@@ -250,7 +250,7 @@ fn claim4_shake_ignores_the_start_on_the_fibre() {
     assert!(d <= 50.0 * EPS, "Hopf with gravity: {d:e}");
 }
 
-/// Claim 5 (run time; the compile-time refusals are tests/ui/nondegeneracy_*):
+/// Claim 5 (run time; the compile-time refusals are shake-ui/tests/ui/nondegeneracy_*):
 /// on an exceptional fibre of the Hopf constraint (|q| = |p|, 5.4.1) N is
 /// singular, and initial data there are refused with a typed error.
 #[test]

@@ -4,7 +4,7 @@
 //! N = {{H,g},g} ≡ 0 (H is linear along the fibre; the problem has index 5),
 //! and H = p²/2, for which H is constant on the fibres (M^H = M, infinitely
 //! many solutions). Declared with `constrained_system!`, both are refused at
-//! compile time (tests/ui/nondegeneracy_*.rs; their messages are printed
+//! compile time (shake-ui/tests/ui/nondegeneracy_*.rs; their messages are printed
 //! below). Written by hand against the runtime's traits, they are refused at
 //! run time with a typed error, and so is a system whose N is singular only
 //! at some points (the exceptional fibres of the Hopf constraint, 5.4.1,
@@ -52,7 +52,7 @@ pub fn run(_ctx: &Ctx, claims: &mut Claims) -> PlotResult<()> {
 
 /// Prints the compile-time refusals that the trybuild tests check.
 fn compile_time_messages() {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/ui");
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shake-ui/tests/ui");
     for case in [
         "nondegeneracy_index_five",
         "nondegeneracy_constant_on_fibres",
@@ -60,9 +60,11 @@ fn compile_time_messages() {
         match std::fs::read_to_string(format!("{dir}/{case}.stderr")) {
             Ok(text) => {
                 let first = text.lines().next().unwrap_or("");
-                println!("   compile time, tests/ui/{case}.rs is refused with:\n     {first}");
+                println!(
+                    "   compile time, shake-ui/tests/ui/{case}.rs is refused with:\n     {first}"
+                );
             }
-            Err(_) => println!("   (tests/ui/{case}.stderr not found)"),
+            Err(_) => println!("   (shake-ui/tests/ui/{case}.stderr not found)"),
         }
     }
 }

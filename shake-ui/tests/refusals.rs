@@ -1,11 +1,9 @@
 //! trybuild UI tests: every `tests/ui/*.rs` is a declaration the macro must
-//! refuse, one failure per file, with its `.stderr`. The declarations it must
-//! accept are ordinary tests (`declarations.rs`): with only `compile_fail`
-//! cases trybuild runs `cargo check`, with one `pass` case it builds every
-//! dev-dependency in debug for its own project.
+//! refuse, one failure per file, with its `.stderr`. With only
+//! `compile_fail` cases trybuild runs `cargo check`, not a build.
 
 #[test]
-fn ui() {
+fn refusals() {
     let t = trybuild::TestCases::new();
     let mut files: Vec<_> = std::fs::read_dir("tests/ui")
         .expect("tests/ui")
