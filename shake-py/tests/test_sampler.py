@@ -238,11 +238,19 @@ def test_ctrl_c_stops_a_long_run():
     import time
 
     sphere = geoshake.declare(SPHERE, kappa=1.0)
+    # Python's own handler, whatever this process inherited: a shell that
+    # starts a job in the background without job control has it ignore
+    # SIGINT, and the signal would then never arrive.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, lambda: signal.raise_signal(signal.SIGINT))
     start = time.perf_counter()
     timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        geoshake.sample(sphere, [0.0, 0.0, 1.0], draws=10, warmup=10**12)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            geoshake.sample(sphere, [0.0, 0.0, 1.0], draws=10, warmup=10**12)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.perf_counter() - start < 5.0
 
 
