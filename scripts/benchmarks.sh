@@ -25,9 +25,9 @@ py="$PWD/target/shake-py-venv/bin/python"
 
 # section | what it needs | command
 sections=(
-  "1|cargo|cargo bench --bench step_cost"
-  "2|cargo|cargo run --release --example work_precision"
-  "3|cargo|cargo run --release --example scaling"
+  "1|cargo|cargo bench -p geoshake-bench --bench step_cost"
+  "2|cargo|cargo bench -p geoshake-bench --bench work_precision"
+  "3|cargo|cargo bench -p geoshake-bench --bench scaling"
   "3.1|cargo|cargo test -p geoshake-macros --release -- --ignored --nocapture expansion_of_chains"
   "4.1|cargo|cargo test --release --test suite perf_derivatives:: -- --nocapture"
   "6|mpi|scripts/ensemble_mpi_throughput.sh"

@@ -35,7 +35,7 @@
 //! start of every run (a single [`step`](crate::Integrator::step) has
 //! nothing to carry and takes the plain SHAKE step).
 //!
-//! Measured (`cargo run --release --example stress`, pendulum, Störmer–
+//! Measured (`cargo bench -p geoshake-bench --bench stress`, pendulum, Störmer–
 //! Verlet, h = 0.01; the round-off part of the energy error isolated by
 //! running n steps forward and n back, RMS over an ensemble): plain
 //! summation drifts, e(n) ∝ n¹·⁰ (8e-13 at n = 10⁵); compensated summation

@@ -6,7 +6,7 @@
 //! otherwise (CI logs, pipes), at most about 20 times a second. It is moved
 //! every `steps/1000` steps only, so a step costs a dynamic call and one
 //! integer comparison more: on 5·10⁶ pendulum steps the difference was
-//! within the timing noise of the shared machine (`examples/stress.rs`
+//! within the timing noise of the shared machine (`shake-bench/benches/stress.rs`
 //! runs 10⁷ steps with the bar on).
 //!
 //! ```

@@ -12,9 +12,9 @@
 //! - [`hopf_lab`]: the computations behind the Section 5.4 scenes and
 //!   `tests/suite/paper_hopf.rs`;
 //! - [`plot`]: the figure helpers of the paper scene (`paper/`) and
-//!   `examples/work_precision.rs`;
+//!   `shake-bench/benches/work_precision.rs`;
 //! - [`bench`](mod@bench): chains, dual-number baselines, the hand-written limit and the
-//!   report tables of `benches/step_cost.rs`, `examples/scaling.rs` and
+//!   report tables of `shake-bench/benches/step_cost.rs`, `shake-bench/benches/scaling.rs` and
 //!   `examples/overhead.rs`.
 #![allow(clippy::needless_range_loop)]
 // The macro's generated docs for the bench chains quote index expressions

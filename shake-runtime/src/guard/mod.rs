@@ -212,8 +212,8 @@ impl Guard {
     /// and λ against its linear prediction. `ws.g` holds g at the new state;
     /// `info` receives N's condition and determinant. (Not inlined: it is
     /// the slice path's, and inlined into a fixed-size step's caller it
-    /// made the pendulum's step 2–4 % slower, `cargo bench --bench
-    /// step_cost`.)
+    /// made the pendulum's step 2–4 % slower, `cargo bench -p
+    /// geoshake-bench --bench step_cost`.)
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     pub(crate) fn after_shake<S: ConstrainedSystem>(

@@ -2,9 +2,9 @@
 //! method over a range of step sizes, the global error at a fixed time
 //! plotted against the run time (log-log), one curve per method.
 //!
-//!     cargo run --release --example work_precision
+//!     cargo bench -p geoshake-bench --bench work_precision
 //!
-//! Writes `benches/results/work_precision_<scene>.{png,svg,csv}` and prints
+//! Writes `shake-bench/benches/results/work_precision_<scene>.{png,svg,csv}` and prints
 //! the table. Methods: SHAKE and RATTLE over each base map (implicit
 //! midpoint, Störmer–Verlet, symplectic Euler), and RATTLE composed to
 //! orders 4, 6 and 8 over a symmetric base map. Errors: max-norm distance of

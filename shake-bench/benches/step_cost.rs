@@ -14,7 +14,7 @@
 //! median estimates of this run). Reduced measurement times keep the whole
 //! bench within a few minutes on two cores:
 //!
-//!     cargo bench --bench step_cost
+//!     cargo bench -p geoshake-bench --bench step_cost
 //!
 //! Nothing here asserts: benchmarks print.
 

@@ -2,11 +2,12 @@
 //! gravity scene, and the growth law of round-off with and without
 //! compensated summation.
 //!
-//!     cargo run --release --example stress            # full sizes (a few minutes)
-//!     cargo run --release --example stress -- --quick # 100× fewer steps
-//!     cargo run --release --example stress --features progress  # with progress bars
+//!     cargo bench -p geoshake-bench --bench stress            # full sizes (a few minutes)
+//!     cargo bench -p geoshake-bench --bench stress -- --quick # 100× fewer steps
+//!     cargo bench -p geoshake-bench --bench stress --features progress  # with progress bars
 //!
-//! Writes PNG, SVG and CSV into `stress-output/` and prints a summary.
+//! Writes PNG, SVG and CSV into `stress-output/` at the repository root
+//! (`--out DIR` elsewhere) and prints a summary.
 //!
 //! # What is measured
 //!
@@ -55,7 +56,9 @@ fn main() -> Res<()> {
         .position(|a| a == "--out")
         .and_then(|i| args.get(i + 1))
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("stress-output"));
+        // cargo runs a bench in its package's directory; the figures go to
+        // the repository root, beside those of the examples.
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../stress-output"));
     let sizes = if quick {
         Sizes {
             pendulum_steps: 100_000,

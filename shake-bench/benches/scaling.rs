@@ -1,6 +1,6 @@
 //! Scaling and "skip what a scene doesn't need", measured:
 //!
-//!     cargo run --release --example scaling
+//!     cargo bench -p geoshake-bench --bench scaling
 //!
 //! 1. Cost per step of a chain of N links against N (SHAKE and RATTLE runs
 //!    with Störmer–Verlet, hand-written and generated code).
