@@ -205,6 +205,34 @@ fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
     Iterate { u, dq, q1, r }
 }
 
+/// The fitted roots of decoupled constraints after the first update
+/// (`super::fitted_roots`, λ in place) and the residual there; `None` if
+/// nothing moved. Out of line and cold: inlined, this third copy of the
+/// residual (the system's g, ∂H/∂p and fibre flow) sits inside the
+/// iteration's loop of every system, and one with a banded Jacobian never
+/// takes it but fetches and decodes around it at every update (the time
+/// of a step depends on the size of that loop, not only on the
+/// instructions it executes).
+#[cold]
+#[inline(never)]
+#[allow(clippy::type_complexity)]
+fn fitted<S: ConstrainedSystem, const D: usize, const M: usize>(
+    sys: &S,
+    h: f64,
+    ((q0, p0, kick), (g0, pattern)): (
+        (&[f64; D], &[f64; D], &[f64; D]),
+        (&[f64], &[(usize, usize)]),
+    ),
+    lambda: &mut [f64; M],
+    r0: &[f64; M],
+    r: &[f64; M],
+    jac: &[[f64; M]; M],
+) -> Option<(Iterate<D, M>, f64)> {
+    let jump = super::fitted_roots(lambda, r0, r, |i| jac[i][i])?;
+    let next = residual::<S, D, M>(sys, h, q0, p0, kick, g0, pattern, Some(lambda));
+    Some((next, jump))
+}
+
 /// SHAKE's Jacobian −h G(q1) A G0ᵀ at `q1`, factorised in `jac`/`piv`, as
 /// `geoshake::classical::jacobian` forms it (the list of terms when A is diagonal,
 /// else the column groups through `grad_p`).
@@ -385,19 +413,11 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
         if diagonal && mon.iterations == 1 {
             // Decoupled constraints: the fitted root of each, as the
             // slice path takes them (`geoshake::classical::shake_step`).
-            let roots = super::fitted_roots(&mut lambda, &r0, &it.r, |i| jac[i][i]);
-            if let Some(jump) = roots {
-                let cl = &ws.classical;
-                it = residual::<S, D, M>(
-                    sys,
-                    h,
-                    &q0,
-                    &p0,
-                    &kick,
-                    &cl.g0,
-                    &cl.pattern,
-                    Some(&lambda),
-                );
+            let cl = &ws.classical;
+            let at = ((&q0, &p0, &kick), (&cl.g0[..], &cl.pattern[..]));
+            if let Some((next, jump)) = fitted::<S, D, M>(sys, h, at, &mut lambda, &r0, &it.r, &jac)
+            {
+                it = next;
                 mon.jump(jump);
                 fresh = false;
                 continue;
