@@ -46,6 +46,9 @@ pub enum Op {
     Add(u32, u32, u32),
     /// `r[d] = r[a] · r[b]`
     Mul(u32, u32, u32),
+    /// `r[d] = r[c] + r[a] · r[b]`: a product whose only reader is a sum,
+    /// fused into it (`fuse`), rounded twice as the two operations are.
+    MulAdd(u32, u32, u32, u32),
     /// `r[d] = r[a] / r[b]`
     Div(u32, u32, u32),
     /// `r[d] = −r[a]`
@@ -67,6 +70,10 @@ pub struct Tape {
     ops: Vec<Op>,
     outs: Vec<(u32, u32)>,
     regs: usize,
+    /// Whether a program's tape reads p, and λ (`Program::compile`): the
+    /// inputs it does not read are not copied in.
+    reads_p: bool,
+    reads_lambda: bool,
 }
 
 impl Tape {
@@ -244,6 +251,7 @@ impl Compiler<'_> {
             .map(|&(i, id)| (i as u32, em.reg[&id]))
             .collect();
         tape.regs = em.next as usize;
+        fuse(&mut tape);
         tape
     }
 
@@ -361,6 +369,50 @@ impl Emitter {
     }
 }
 
+/// Fuses each product that only one sum reads (not an output, not read
+/// twice) into that sum: `t = a·b; d = c + t` becomes `d = c + a·b` at the
+/// sum's place. Sums of products, the bulk of a constraint's tape and of
+/// its derivatives', then take one dispatch of the interpreter per term
+/// instead of two. The numbers are the same to the bit: the product is
+/// still rounded before the sum (no fused multiply-add), addition is
+/// commutative in IEEE arithmetic, and a and b still hold their values at
+/// the sum's place (each register is written once per run).
+fn fuse(tape: &mut Tape) {
+    let mut reads: HashMap<u32, u32> = HashMap::new();
+    for r in registers_read(tape) {
+        *reads.entry(r).or_insert(0) += 1;
+    }
+    // The instruction that writes each product read once.
+    let mut product: HashMap<u32, usize> = HashMap::new();
+    for (i, op) in tape.ops.iter().enumerate() {
+        if let Op::Mul(d, _, _) = *op
+            && reads.get(&d) == Some(&1)
+        {
+            product.insert(d, i);
+        }
+    }
+    let mut dead = vec![false; tape.ops.len()];
+    for i in 0..tape.ops.len() {
+        let Op::Add(d, x, y) = tape.ops[i] else {
+            continue;
+        };
+        // The later term first (a sum's running total is its left operand).
+        let fused = [(y, x), (x, y)].into_iter().find_map(|(t, c)| {
+            let &at = product.get(&t)?;
+            let Op::Mul(_, a, b) = tape.ops[at] else {
+                unreachable!("a product's instruction")
+            };
+            Some((at, Op::MulAdd(d, c, a, b)))
+        });
+        if let Some((at, op)) = fused {
+            dead[at] = true;
+            tape.ops[i] = op;
+        }
+    }
+    let mut keep = dead.iter().map(|d| !d);
+    tape.ops.retain(|_| keep.next().unwrap_or(true));
+}
+
 /// Renumbers a tape's temporaries to start at `first`.
 fn shift(tape: &mut Tape, first: u32) {
     let s = |r: &mut u32| {
@@ -372,6 +424,12 @@ fn shift(tape: &mut Tape, first: u32) {
         match op {
             Op::Add(d, a, b) | Op::Mul(d, a, b) | Op::Div(d, a, b) | Op::Powf(d, a, b) => {
                 s(d);
+                s(a);
+                s(b);
+            }
+            Op::MulAdd(d, c, a, b) => {
+                s(d);
+                s(c);
                 s(a);
                 s(b);
             }
@@ -496,6 +554,10 @@ impl Program {
         for t in p.tapes_mut() {
             shift(t, first);
             check_registers(t);
+            let reads = |range: std::ops::Range<usize>| {
+                registers_read(t).any(|r| range.contains(&(r as usize)))
+            };
+            (t.reads_p, t.reads_lambda) = (reads(d..n2), reads(n2..n2 + m));
         }
         p
     }
@@ -571,15 +633,20 @@ impl Program {
     ) {
         let (d, m) = (self.dof, self.m);
         // Element by element: these are a few entries, below the size where
-        // a call to memcpy pays.
+        // a call to memcpy pays. Only what the tape reads (g(q) reads no p):
+        // the other registers are never read, whatever they hold.
         for (r, x) in r[..d].iter_mut().zip(q) {
             *r = *x;
         }
-        for (r, x) in r[d..2 * d].iter_mut().zip(p) {
-            *r = *x;
+        if tape.reads_p {
+            for (r, x) in r[d..2 * d].iter_mut().zip(p) {
+                *r = *x;
+            }
         }
-        for (r, x) in r[2 * d..2 * d + m].iter_mut().zip(lambda) {
-            *r = *x;
+        if tape.reads_lambda {
+            for (r, x) in r[2 * d..2 * d + m].iter_mut().zip(lambda) {
+                *r = *x;
+            }
         }
         if statics {
             let b = 2 * d + m;
@@ -636,6 +703,7 @@ fn execute(ops: &[Op], r: &mut [f64]) {
             match *op {
                 Op::Add(d, a, b) => set(d, g(a) + g(b)),
                 Op::Mul(d, a, b) => set(d, g(a) * g(b)),
+                Op::MulAdd(d, c, a, b) => set(d, g(c) + g(a) * g(b)),
                 Op::Div(d, a, b) => set(d, g(a) / g(b)),
                 Op::Neg(d, a) => set(d, -g(a)),
                 Op::Powi(d, a, n) => set(d, g(a).powi(n)),
@@ -647,22 +715,96 @@ fn execute(ops: &[Op], r: &mut [f64]) {
     }
 }
 
+/// Every register `tape` reads: its instructions' operands and its
+/// outputs.
+fn registers_read(tape: &Tape) -> impl Iterator<Item = u32> + '_ {
+    let operands = tape.ops.iter().flat_map(|op| match *op {
+        Op::Add(_, a, b) | Op::Mul(_, a, b) | Op::Div(_, a, b) | Op::Powf(_, a, b) => {
+            [Some(a), Some(b), None]
+        }
+        Op::MulAdd(_, c, a, b) => [Some(c), Some(a), Some(b)],
+        Op::Neg(_, a) | Op::Powi(_, a, _) | Op::Sqrt(_, a) | Op::Call(_, _, a) => {
+            [Some(a), None, None]
+        }
+    });
+    operands.flatten().chain(tape.outs.iter().map(|o| o.1))
+}
+
+/// The register an instruction writes.
+fn written(op: &Op) -> u32 {
+    match *op {
+        Op::Add(d, ..)
+        | Op::Mul(d, ..)
+        | Op::MulAdd(d, ..)
+        | Op::Div(d, ..)
+        | Op::Powf(d, ..)
+        | Op::Neg(d, _)
+        | Op::Powi(d, ..)
+        | Op::Sqrt(d, _)
+        | Op::Call(d, ..) => d,
+    }
+}
+
 /// Panics unless every register of `tape` is below `tape.regs` (the
 /// invariant `execute` relies on; a compiler bug otherwise).
 fn check_registers(tape: &Tape) {
     let n = tape.regs as u32;
-    let ok = tape.ops.iter().all(|op| match *op {
-        Op::Add(d, a, b) | Op::Mul(d, a, b) | Op::Div(d, a, b) | Op::Powf(d, a, b) => {
-            d < n && a < n && b < n
-        }
-        Op::Neg(d, a) | Op::Powi(d, a, _) | Op::Sqrt(d, a) | Op::Call(d, _, a) => d < n && a < n,
-    }) && tape.outs.iter().all(|o| o.1 < n);
+    let ok = tape.ops.iter().all(|op| written(op) < n) && registers_read(tape).all(|r| r < n);
     assert!(ok, "tape names a register past its register file");
 }
 
 #[cfg(test)]
 mod tests {
-    use super::Program;
+    use super::{execute, fuse, Op, Program, Tape};
+
+    /// A product read once by a sum is fused into it, on either side of
+    /// the sum, with the numbers of the two operations to the bit; a
+    /// product that is also an output, or read twice, is not.
+    #[test]
+    fn products_fuse_into_their_sums_with_the_same_numbers() {
+        // r6 = r0·r1, r7 = r2·r3, r8 = r6 + r7, r9 = r4·r5, r10 = r9 + r8,
+        // r11 = r0·r2 (an output), r12 = r11 + r5, r13 = r1·r3 (read twice),
+        // r14 = r13 + r13.
+        let ops = vec![
+            Op::Mul(6, 0, 1),
+            Op::Mul(7, 2, 3),
+            Op::Add(8, 6, 7),
+            Op::Mul(9, 4, 5),
+            Op::Add(10, 9, 8),
+            Op::Mul(11, 0, 2),
+            Op::Add(12, 11, 5),
+            Op::Mul(13, 1, 3),
+            Op::Add(14, 13, 13),
+        ];
+        let outs = vec![(0, 10), (1, 11), (2, 12), (3, 14)];
+        let plain = Tape {
+            ops,
+            outs,
+            regs: 15,
+            ..Tape::default()
+        };
+        let mut fused = plain.clone();
+        fuse(&mut fused);
+        // r7 into r8, r9 into r10; r6, r11 and r13 stay.
+        assert_eq!(fused.len(), plain.len() - 2, "{:?}", fused.ops);
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..1000 {
+            let mut x = [0.0; 15];
+            for v in &mut x[..6] {
+                // Uniform in [−1, 1), with all 52 bits of the mantissa in play.
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                *v = (state >> 11) as f64 / (1u64 << 52) as f64 - 1.0;
+            }
+            let (mut a, mut b) = (x, x);
+            execute(&plain.ops, &mut a);
+            execute(&fused.ops, &mut b);
+            for &(_, r) in &plain.outs {
+                assert_eq!(a[r as usize].to_bits(), b[r as usize].to_bits());
+            }
+        }
+    }
 
     /// Every instruction kind against the formula written by hand: a
     /// Hamiltonian with a quotient, a real power, sqrt, 1/sqrt, powi and the
