@@ -215,14 +215,15 @@ fn residual<S: ConstrainedSystem, const D: usize, const M: usize>(
 /// instructions it executes).
 #[cold]
 #[inline(never)]
-#[allow(clippy::type_complexity)]
+#[allow(clippy::too_many_arguments)]
 fn fitted<S: ConstrainedSystem, const D: usize, const M: usize>(
     sys: &S,
     h: f64,
-    ((q0, p0, kick), (g0, pattern)): (
-        (&[f64; D], &[f64; D], &[f64; D]),
-        (&[f64], &[(usize, usize)]),
-    ),
+    q0: &[f64; D],
+    p0: &[f64; D],
+    kick: &[f64; D],
+    g0: &[f64],
+    pattern: &[(usize, usize)],
     lambda: &mut [f64; M],
     r0: &[f64; M],
     r: &[f64; M],
@@ -414,8 +415,10 @@ pub(crate) fn shake<S: ConstrainedSystem, const D: usize, const M: usize>(
             // Decoupled constraints: the fitted root of each, as the
             // slice path takes them (`geoshake::classical::shake_step`).
             let cl = &ws.classical;
-            let at = ((&q0, &p0, &kick), (&cl.g0[..], &cl.pattern[..]));
-            if let Some((next, jump)) = fitted::<S, D, M>(sys, h, at, &mut lambda, &r0, &it.r, &jac)
+            let (g0, pattern) = (&cl.g0[..], &cl.pattern[..]);
+            let (r, lambda) = (&it.r, &mut lambda);
+            if let Some((next, jump)) =
+                fitted::<S, D, M>(sys, h, &q0, &p0, &kick, g0, pattern, lambda, &r0, r, &jac)
             {
                 it = next;
                 mon.jump(jump);
