@@ -174,7 +174,7 @@ pub enum StepError {
     /// does not fit in a machine word): refused before the first step, by
     /// a reservation of the whole trajectory, rather than an abort of the
     /// process when the buffer grows later.
-    #[error("step {step}: storing {states} states of 2·{dof} numbers each does not fit in memory")]
+    #[error("step {step}: storing {states} states of 2·{dof} numbers each does not fit in memory: store fewer (a larger stride)")]
     Storage {
         /// The step the run starts from.
         step: u64,

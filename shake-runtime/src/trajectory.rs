@@ -404,6 +404,24 @@ impl Trajectory {
         self.data.extend_from_slice(p);
     }
 
+    /// The stored states back to back, each q then p (2d numbers), taken
+    /// out of the trajectory without a copy: for a caller that lays them
+    /// out anew and cannot afford two copies of a long run at once.
+    ///
+    /// ```
+    /// use geoshake_runtime::{Integrator, StormerVerlet, State, Stop, examples::Pendulum};
+    /// let mut integ = Integrator::new(Pendulum::default(), StormerVerlet, 0.1);
+    /// let z0 = State::from_slices(&[0.0, -1.0], &[0.5, 0.0]);
+    /// let traj = integ.run(z0, Stop::Steps(2)).execute().trajectory;
+    /// let (q1, p1) = (traj.q(1).to_vec(), traj.p(1).to_vec());
+    /// let words = traj.into_states();
+    /// assert_eq!(words.len(), 3 * 4);
+    /// assert_eq!((&words[4..6], &words[6..8]), (&q1[..], &p1[..]));
+    /// ```
+    pub fn into_states(self) -> Vec<f64> {
+        self.data
+    }
+
     /// Number of stored states.
     ///
     /// ```

@@ -64,7 +64,7 @@ pub enum DeclareError {
     #[error("{0}")]
     Declaration(#[from] DeclError),
     /// A value was given for a name the declaration does not have.
-    #[error("unknown parameter `{name}`; the declaration's parameters are: {declared}")]
+    #[error("unknown parameter `{name}`; {}", if declared.is_empty() { "the declaration has no parameters".to_string() } else { format!("the declaration's parameters are: {declared}") })]
     UnknownParameter {
         /// The name given.
         name: String,
@@ -76,6 +76,15 @@ pub enum DeclareError {
     MissingParameter {
         /// The declared name.
         name: String,
+    },
+    /// A parameter was given a value that is not finite: every number
+    /// the tape computes from it would be NaN or infinite.
+    #[error("parameter `{name}` must be finite, not {value}")]
+    NonFiniteParameter {
+        /// The name given.
+        name: String,
+        /// Its value.
+        value: f64,
     },
     /// A parameter was given two values.
     #[error("parameter `{name}` is given twice")]
@@ -131,6 +140,12 @@ fn parameter_values(names: &[String], given: &[(&str, f64)]) -> Result<Vec<f64>,
                     name: name.into(),
                     declared: names.join(", "),
                 })?;
+        if !value.is_finite() {
+            return Err(DeclareError::NonFiniteParameter {
+                name: name.into(),
+                value,
+            });
+        }
         if values[i].replace(value).is_some() {
             return Err(DeclareError::DuplicateParameter { name: name.into() });
         }

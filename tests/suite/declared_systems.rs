@@ -246,4 +246,13 @@ fn parameters_are_checked_by_name() {
             name: "length".into()
         }
     );
+    // A value that is not finite would make every number of the tape NaN
+    // or infinite, far from the name that caused it.
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let e = DeclaredSystem::new(PENDULUM, &[("length", 1.0), ("gravity", bad)]).unwrap_err();
+        assert!(
+            matches!(e, DeclareError::NonFiniteParameter { ref name, value } if name == "gravity" && value.to_bits() == bad.to_bits()),
+            "{e}"
+        );
+    }
 }

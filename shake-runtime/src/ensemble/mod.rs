@@ -102,8 +102,22 @@ impl Template for Rattle {
     type Start = ParticleState;
 
     fn run_member(&mut self, start: &ParticleState, stop: Stop, stride: u64) -> RunOutcome {
+        self.member_run(start, stop).stride(stride).execute()
+    }
+}
+
+impl Rattle {
+    /// The run of an ensemble's member from `start`, as
+    /// [`Template::run_member`] makes it, for a caller that configures it
+    /// further ([`Run::on_step`](crate::run::Run::on_step) to stop it,
+    /// say) before [`execute`](crate::run::Run::execute).
+    pub fn member_run(
+        &mut self,
+        start: &ParticleState,
+        stop: Stop,
+    ) -> crate::run::Run<'_, Self, fn(u64, f64, &crate::State)> {
         self.forget_last_state();
-        self.run(start, stop).stride(stride).execute()
+        self.run(start, stop)
     }
 }
 

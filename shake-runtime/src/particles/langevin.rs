@@ -16,7 +16,7 @@ impl Rattle {
     pub fn set_thermostat(&mut self, thermostat: Option<Langevin>) -> Result<(), StepError> {
         if thermostat.is_some() && self.options().method != Method::Rattle {
             return Err(StepError::InvalidInput {
-                what: "a Langevin thermostat needs Method::Rattle (its projection onto the cotangent space)",
+                what: "a Langevin thermostat needs the RATTLE method (its projection onto the cotangent space), not SHAKE",
                 value: f64::NAN,
             });
         }

@@ -65,19 +65,20 @@ impl<F: ForceField + Clone + Sync + 'static> Field for F {
 }
 
 impl ParticleSystem {
-    /// Particles in R^`dim` with the given masses (finite and positive), no
-    /// constraint and no potential yet.
+    /// Particles in R^`dim` with the given masses (finite and positive,
+    /// with a finite inverse: the steps divide by them), no constraint and
+    /// no potential yet.
     pub fn new(dim: usize, masses: Vec<f64>) -> Result<Self, TopologyError> {
         if let Some((a, &m)) = masses
             .iter()
             .enumerate()
-            .find(|(_, m)| !(m.is_finite() && **m > 0.0))
+            .find(|(_, m)| !(m.is_finite() && **m > 0.0 && (1.0 / **m).is_finite()))
         {
             return Err(TopologyError::BadValue {
                 family: "masses".into(),
                 member: a,
                 value: m,
-                why: "a mass must be finite and positive",
+                why: "a mass must be finite and positive, and so must its inverse",
             });
         }
         let inverse_masses = masses.iter().map(|m| 1.0 / m).collect();
@@ -294,5 +295,24 @@ impl ParticleSystem {
             v += f.energy_gradient(q, grad);
         }
         v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn masses_and_their_inverses_must_be_finite_and_positive() {
+        assert!(ParticleSystem::new(3, vec![1.0, 2.0, f64::MIN_POSITIVE]).is_ok());
+        // 5e-324 is positive and finite; its inverse is not, and every
+        // step divides by the masses.
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY, 5e-324] {
+            let e = ParticleSystem::new(3, vec![1.0, bad]).err();
+            assert!(
+                matches!(e, Some(TopologyError::BadValue { member: 1, value, .. }) if value.to_bits() == bad.to_bits()),
+                "{bad}: {e:?}"
+            );
+        }
     }
 }
