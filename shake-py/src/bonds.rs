@@ -248,14 +248,17 @@ impl Bonds {
     }
 }
 
-/// A solver error as the package's exception, with the bond at fault
-/// (`member`, the row of `pairs`) when there is one.
+/// A solver error as the package's exception, with the constraint at
+/// fault when there is one: `family` (its declared name; `"bond"` for
+/// `Bonds`) and `member` (the row of its table, of `pairs` for `Bonds`),
+/// both None otherwise.
 pub(crate) fn error(py: Python<'_>, e: &StepError) -> PyErr {
     let err = typed_error(py, e);
-    let member = match e {
-        StepError::AtMember { member, .. } => Some(*member),
-        _ => None,
+    let (family, member) = match e {
+        StepError::AtMember { family, member, .. } => (Some(family.as_str()), Some(*member)),
+        _ => (None, None),
     };
+    let _ = err.value(py).setattr("family", family);
     let _ = err.value(py).setattr("member", member);
     err
 }

@@ -11,6 +11,10 @@ mod particles;
 mod sampler;
 mod thermostat;
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Duration;
+
 use geoshake::declared::{DeclareError, DeclaredSystem};
 use geoshake::{
     BaseMap, ConstrainedSystem, Hamiltonian, ImplicitMidpoint, Integrator, Options, RunOutcome,
@@ -271,7 +275,8 @@ pub(crate) fn declare_error(e: DeclareError) -> PyErr {
             ),
             DeclareError::UnknownParameter { .. }
             | DeclareError::MissingParameter { .. }
-            | DeclareError::DuplicateParameter { .. } => {
+            | DeclareError::DuplicateParameter { .. }
+            | DeclareError::NonFiniteParameter { .. } => {
                 (ParameterError::new_err(e.to_string()), None, None)
             }
             DeclareError::Tables { .. } | DeclareError::Topology(_) => {
@@ -614,6 +619,48 @@ pub(crate) fn refused(py: Python<'_>, e: PyErr, says: impl FnOnce(&PyErr) -> Str
 
 /// A state's layout, for [`real_array`]'s messages.
 const Z: &str = "q then p, 2d";
+
+/// Runs `work` on a scoped thread, without the interpreter's lock, while
+/// this thread takes the lock back every 50 ms to let Python see a signal:
+/// when a handler raises (Ctrl-C's `KeyboardInterrupt`), `halt` is set for
+/// `work` to stop at its next look, and the handler's exception is
+/// returned beside `work`'s result. Returns as soon as `work` ends (a
+/// sleep of 50 ms between looks would add 25 ms on average to every
+/// call); a panic in `work` ends the wait too, and is the `Err` of its
+/// result.
+pub(crate) fn watching<T: Send>(
+    py: Python<'_>,
+    halt: &AtomicBool,
+    work: impl FnOnce() -> T + Send,
+) -> (std::thread::Result<T>, Option<PyErr>) {
+    std::thread::scope(|scope| {
+        let (done, finished) = mpsc::channel::<()>();
+        let worker = scope.spawn(move || {
+            let out = work();
+            let _ = done.send(());
+            out
+        });
+        let mut interrupt = None;
+        let mut finished = finished;
+        loop {
+            if interrupt.is_none() {
+                if let Err(e) = py.check_signals() {
+                    halt.store(true, Ordering::Relaxed);
+                    interrupt = Some(e);
+                }
+            }
+            let (rx, seen) = py.detach(move || {
+                let seen = finished.recv_timeout(Duration::from_millis(50));
+                (finished, seen)
+            });
+            finished = rx;
+            if !matches!(seen, Err(mpsc::RecvTimeoutError::Timeout)) {
+                break;
+            }
+        }
+        (worker.join(), interrupt)
+    })
+}
 
 /// `obj` as real numbers in a float64 array of `ndim` dimensions, the last
 /// of length `len` (`what` says which: "q then p, 2d" or "q, d"),

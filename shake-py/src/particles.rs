@@ -4,25 +4,28 @@
 //! SHAKE (`geoshake::runtime::particles::Rattle`) on NumPy arrays of shape
 //! (n, D).
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 
 use geoshake::declared::{DeclaredParticles as Declared, FamilyKind};
-use geoshake::runtime::ensemble::Template;
 use geoshake::runtime::particles::{
     ConstraintForces as Forces, Method, Options, ParticleState, Rattle, Table, TopologyError,
 };
-use geoshake::{RunOutcome, StepError, Stop};
+use geoshake::{RunOutcome, StepError, StepEvent, Stop};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3};
-use pyo3::exceptions::PyException;
+use pyo3::exceptions::{PyException, PyMemoryError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::bonds::{error, topology};
 use crate::forces::{self, type_name, PyForces};
 use crate::thermostat::Langevin;
-use crate::{declare_error, keyword_parameters, real_array, refused, InvalidInputError};
+use crate::{
+    declare_error, keyword_parameters, real_array, refused, watching, InvalidInputError,
+    NonFiniteError,
+};
 
 /// Declares a particle system from a string in the grammar of
 /// `constrained_system!` (a `struct` with `particles x[D];` and families
@@ -336,6 +339,23 @@ fn same(a: &ParticleState, b: &ParticleState) -> bool {
     bits(a.q(), b.q()) && bits(a.p(), b.p())
 }
 
+/// The arguments of `run` and `ensemble` that no state can make right,
+/// refused before any work: a run of them would be an empty run carrying
+/// an error that a caller who does not look at `error` never sees.
+fn run_arguments(stride: u64, t0: f64) -> PyResult<()> {
+    if stride == 0 {
+        return Err(InvalidInputError::new_err(
+            "stride must be at least 1 (1 keeps every frame), not 0",
+        ));
+    }
+    if !t0.is_finite() {
+        return Err(InvalidInputError::new_err(format!(
+            "t0 must be finite, not {t0}"
+        )));
+    }
+    Ok(())
+}
+
 /// The exception for an error `e` of a step or a run on this thread: the
 /// forces callable's own if it raised (the step's `NonFiniteError` only
 /// followed from it; a note on the exception names the step), else the
@@ -345,6 +365,29 @@ fn failure(py: Python<'_>, e: &StepError) -> PyErr {
         Some(raised) => noted(py, raised, e),
         None => error(py, e),
     }
+}
+
+/// The exception of a step's error `e` on another thread, which `raised`
+/// there: the forces callable's own, else the package's.
+fn raised_or(py: Python<'_>, raised: Option<PyErr>, e: &StepError) -> PyErr {
+    match raised {
+        Some(raised) => noted(py, raised, e),
+        None => error(py, e),
+    }
+}
+
+/// A run's `on_step`: stop when `halt` is set (Ctrl-C, seen by
+/// [`watching`]).
+fn halted(halt: &AtomicBool) -> ControlFlow<()> {
+    if halt.load(Ordering::Relaxed) {
+        ControlFlow::Break(())
+    } else {
+        ControlFlow::Continue(())
+    }
+}
+
+fn panicked() -> PyErr {
+    InvalidInputError::new_err("the run's thread panicked")
 }
 
 /// A run's error, to keep in its `ParticleRun`; raised instead when it is
@@ -474,11 +517,13 @@ impl ParticleRattle {
     /// One step from (q, p): returns the new arrays (q, p), or raises the
     /// step's error (the forces callable's own exception if it raised).
     ///
-    /// Given back the arrays its last call returned (the same numbers), a
-    /// step goes on from that state: its step count (with a thermostat,
-    /// the noise of step k is a function of the seed and k), the forces
-    /// already computed there, and `constraint_forces` of the step that
-    /// made it. Other arrays are a new state at step 0.
+    /// The step count goes on from call to call (with a thermostat, the
+    /// noise of step k is a function of the seed and k, so no step's noise
+    /// is drawn twice, whatever arrays each call is given: positions
+    /// wrapped into a box, or a retry after a failed step, which counts
+    /// as not taken). Given back the arrays its last call returned (the
+    /// same numbers), a step also reuses the forces already computed
+    /// there, and `constraint_forces` answers for the step that made them.
     fn step<'py>(
         &self,
         py: Python<'py>,
@@ -490,14 +535,24 @@ impl ParticleRattle {
         let Solver { rattle, last } = &mut *solver;
         let mut state = match last.take() {
             Some(s) if same(&s, &given) => s,
-            _ => given,
+            // Other numbers (positions wrapped into a box, another
+            // replica): a new state for the caches, but the step count
+            // goes on, so that a thermostat never draws one step's noise
+            // twice.
+            Some(mut s) => {
+                s.q_mut().copy_from_slice(given.q());
+                s.p_mut().copy_from_slice(given.p());
+                s
+            }
+            None => given,
         };
         forces::take_raised();
-        py.detach(|| rattle.step(&mut state))
-            .map_err(|e| failure(py, &e))?;
-        let out = self.pair(py, &state);
+        let taken = py.detach(|| rattle.step(&mut state));
+        // A failed step leaves the state as it was: kept, count and all,
+        // for a retry.
+        let out = taken.map(|_| self.pair(py, &state));
         *last = Some(state);
-        Ok(out)
+        out.map_err(|e| failure(py, &e))
     }
 
     /// `steps` steps from (q, p) at time `t0`, keeping every `stride`-th
@@ -520,13 +575,27 @@ impl ParticleRattle {
         stride: u64,
         t0: f64,
     ) -> PyResult<ParticleRun> {
+        run_arguments(stride, t0)?;
         let state = self.state(q, p)?.with_time(t0);
         let mut solver = self.solver(py)?;
         let r = &mut solver.rattle;
-        forces::take_raised();
-        let out = py.detach(|| r.run(&state, Stop::Steps(steps)).stride(stride).execute());
-        let error = out.error.as_ref().map(|e| failure(py, e));
-        Ok(self.frames(py, &out, interrupted(py, error)?))
+        let halt = AtomicBool::new(false);
+        let (taken, interrupt) = watching(py, &halt, || {
+            forces::take_raised();
+            let mut look = |_: &StepEvent| halted(&halt);
+            let run = r.run(&state, Stop::Steps(steps)).stride(stride);
+            let out = run.on_step(&mut look).execute();
+            (out, forces::take_raised())
+        });
+        let (out, raised) = taken.map_err(|_| panicked())?;
+        if let Some(e) = interrupt {
+            return Err(self.with_frames(py, e, out)?);
+        }
+        let error = out.error.as_ref().map(|e| raised_or(py, raised, e));
+        match interrupted(py, error)? {
+            Some(e) if matches!(out.error, Some(StepError::Storage { .. })) => Err(e),
+            error => self.frames(py, out, error),
+        }
     }
 
     /// Runs every member (qs[i], ps[i]) as `run` does, in parallel on all
@@ -550,6 +619,7 @@ impl ParticleRattle {
         stride: u64,
         t0: f64,
     ) -> PyResult<Vec<ParticleRun>> {
+        run_arguments(stride, t0)?;
         let qs = self.members(qs, "qs")?;
         let ps = self.members(ps, "ps")?;
         if qs.len() != ps.len() {
@@ -567,12 +637,17 @@ impl ParticleRattle {
         let solver = self.solver(py)?;
         let template = &solver.rattle;
         let thermostat = self.thermostat.as_ref();
-        let outs = py.detach(|| {
+        let halt = AtomicBool::new(false);
+        let (outs, interrupt) = watching(py, &halt, || {
             geoshake::ensemble(template, &starts, |copy, i, start| {
                 forces::take_raised();
                 let member = thermostat.map(|t| t.for_member(i as u64).inner);
+                let mut look = |_: &StepEvent| halted(&halt);
                 let out = match copy.set_thermostat(member) {
-                    Ok(()) => copy.run_member(start, Stop::Steps(steps), stride),
+                    Ok(()) => {
+                        let run = copy.member_run(start, Stop::Steps(steps)).stride(stride);
+                        run.on_step(&mut look).execute()
+                    }
                     Err(e) => RunOutcome {
                         trajectory: Default::default(),
                         summary: Default::default(),
@@ -582,13 +657,29 @@ impl ParticleRattle {
                 (out, forces::take_raised())
             })
         });
+        let outs = outs.map_err(|_| panicked())?;
+        if let Some(e) = interrupt {
+            let runs: Vec<ParticleRun> = outs
+                .into_iter()
+                .map(|(out, _)| self.frames(py, out, None))
+                .collect::<PyResult<_>>()?;
+            let _ = e.value(py).setattr("runs", runs);
+            return Err(e);
+        }
+        // Every member stores as many frames: one that does not fit is
+        // the arguments' fault, not a member's.
+        let storage = outs.iter().find_map(|(o, _)| {
+            o.error
+                .as_ref()
+                .filter(|e| matches!(e, StepError::Storage { .. }))
+        });
+        if let Some(e) = storage {
+            return Err(error(py, e));
+        }
         outs.into_iter()
             .map(|(out, raised)| {
-                let error = out.error.as_ref().map(|e| match raised {
-                    Some(raised) => noted(py, raised, e),
-                    None => error(py, e),
-                });
-                Ok(self.frames(py, &out, interrupted(py, error)?))
+                let error = out.error.as_ref().map(|e| raised_or(py, raised, e));
+                self.frames(py, out, interrupted(py, error)?)
             })
             .collect()
     }
@@ -597,7 +688,14 @@ impl ParticleRattle {
     fn kinetic_energy(&self, py: Python<'_>, p: &Bound<'_, PyAny>) -> PyResult<f64> {
         let (p, _) = self.array(p, "p")?;
         let solver = self.solver(py)?;
-        Ok(solver.rattle.system().kinetic_energy(&p))
+        let t = solver.rattle.system().kinetic_energy(&p);
+        if !t.is_finite() {
+            return Err(NonFiniteError::new_err(format!(
+                "the kinetic energy of p is {t}: p holds a number that is not finite, or \
+                 momenta whose squares overflow"
+            )));
+        }
+        Ok(t)
     }
 
     /// The potential energy V(q) = Σ_fam V_fam(q) + V_ext(q) of positions
@@ -606,6 +704,11 @@ impl ParticleRattle {
     /// it raises, `NonFiniteError` for forces or a V not finite.
     fn potential_energy(&self, py: Python<'_>, q: &Bound<'_, PyAny>) -> PyResult<f64> {
         let (q, _) = self.array(q, "q")?;
+        if let Some(x) = q.iter().find(|x| !x.is_finite()) {
+            return Err(NonFiniteError::new_err(format!(
+                "q must be finite, not {x}"
+            )));
+        }
         let state = ParticleState::new(q, vec![0.0; self.particles * self.dim]);
         let mut solver = self.solver(py)?;
         let r = &mut solver.rattle;
@@ -744,28 +847,30 @@ impl ParticleRattle {
     fn members(&self, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Vec<f64>>> {
         let (n, d) = (self.particles, self.dim);
         let np = obj.py().import("numpy")?;
-        let shape: Vec<usize> = np
-            .call_method1("shape", (obj,))
-            .and_then(|s| s.extract())
-            .map_err(|e| {
-                refused(obj.py(), e, |e| {
-                    format!(
-                        "{name} must be an array of real numbers of shape (members, {n}, {d}): {}",
-                        e.value(obj.py())
-                    )
-                })
-            })?;
+        // Read once: an object whose `__array__` answers differently on a
+        // second call must not give the shape of one answer and the
+        // numbers of another.
+        let array = np.call_method1("asarray", (obj,)).map_err(|e| {
+            refused(obj.py(), e, |e| {
+                format!(
+                    "{name} must be an array of real numbers of shape (members, {n}, {d}): {}",
+                    e.value(obj.py())
+                )
+            })
+        })?;
+        let shape: Vec<usize> = array.getattr("shape")?.extract()?;
         if shape.len() != 3 || shape[1] != n || shape[2] != d {
             return Err(InvalidInputError::new_err(format!(
                 "{name} must have shape (members, {n}, {d}): a state of n = {n} particles in \
                  R^{d} per member, not {shape:?}"
             )));
         }
-        let (flat, _) = real_array(obj, name, 3, d, "D")?;
+        let (flat, _) = real_array(&array, name, 3, d, "D")?;
         let size = n * d;
-        Ok((0..shape[0])
-            .map(|i| flat[i * size..(i + 1) * size].to_vec())
-            .collect())
+        if size == 0 {
+            return Ok(vec![Vec::new(); shape[0]]);
+        }
+        Ok(flat.chunks_exact(size).map(<[f64]>::to_vec).collect())
     }
 
     fn state(&self, q: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<ParticleState> {
@@ -782,32 +887,62 @@ impl ParticleRattle {
         (q.into_pyarray(py), p.into_pyarray(py))
     }
 
+    /// `interrupt` (Ctrl-C during a run) with the run's frames up to it
+    /// as its attribute `run`: stopped on request, nothing computed is
+    /// lost.
+    fn with_frames(&self, py: Python<'_>, interrupt: PyErr, out: RunOutcome) -> PyResult<PyErr> {
+        let run = self.frames(py, out, None)?;
+        let _ = interrupt.value(py).setattr("run", run);
+        Ok(interrupt)
+    }
+
     /// The run's frames as arrays, with `error`, the exception of its
     /// error (if any).
-    fn frames(&self, py: Python<'_>, out: &RunOutcome, error: Option<PyErr>) -> ParticleRun {
-        let t = &out.trajectory;
+    ///
+    /// The trajectory holds each frame's q then p; the arrays want all q,
+    /// then all p. The p are copied out and the q packed in place, so a
+    /// long run needs 1.5 times its frames at once, not twice, and a copy
+    /// that does not fit raises `MemoryError` instead of aborting.
+    fn frames(
+        &self,
+        py: Python<'_>,
+        out: RunOutcome,
+        error: Option<PyErr>,
+    ) -> PyResult<ParticleRun> {
+        let t = out.trajectory;
         let n = t.len();
-        let shape = (n, self.particles, self.dim);
-        let (mut q, mut p) = (
-            Vec::with_capacity(n * self.particles * self.dim),
-            Vec::with_capacity(n * self.particles * self.dim),
-        );
+        let (time, step) = (t.times(), t.steps());
+        let size = self.particles * self.dim;
+        let mut q = t.into_states();
+        let mut p = Vec::new();
+        if p.try_reserve_exact(n * size).is_err() {
+            return Err(PyMemoryError::new_err(format!(
+                "the run's {n} frames were computed, but their momenta ({} bytes) do not fit \
+                 beside them in memory: keep fewer frames (a larger stride)",
+                8 * n * size
+            )));
+        }
         for i in 0..n {
-            q.extend_from_slice(t.q(i));
-            p.extend_from_slice(t.p(i));
+            p.extend_from_slice(&q[(2 * i + 1) * size..(2 * i + 2) * size]);
         }
-        ParticleRun {
-            q: Array3::from_shape_vec(shape, q)
+        for i in 1..n {
+            q.copy_within(2 * i * size..(2 * i + 1) * size, i * size);
+        }
+        q.truncate(n * size);
+        q.shrink_to_fit();
+        let shape = (n, self.particles, self.dim);
+        let array = |v: Vec<f64>| {
+            Array3::from_shape_vec(shape, v)
                 .expect("frames·n·D")
                 .into_pyarray(py)
-                .unbind(),
-            p: Array3::from_shape_vec(shape, p)
-                .expect("frames·n·D")
-                .into_pyarray(py)
-                .unbind(),
-            time: Array1::from(t.times()).into_pyarray(py).unbind(),
-            step: Array1::from(t.steps()).into_pyarray(py).unbind(),
+                .unbind()
+        };
+        Ok(ParticleRun {
+            q: array(q),
+            p: array(p),
+            time: Array1::from(time).into_pyarray(py).unbind(),
+            step: Array1::from(step).into_pyarray(py).unbind(),
             error: error.map(|e| e.value(py).clone().into_any().unbind()),
-        }
+        })
     }
 }

@@ -3,9 +3,7 @@
 //! and the Metropolis test) for a declared or compiled system, with the
 //! draws as NumPy arrays of shape (chains, draws, d).
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc;
-use std::time::Duration;
+use std::sync::atomic::AtomicBool;
 
 use geoshake::runtime::sampler::{self, Density, SamplerError, SamplerOptions, Samples};
 use numpy::ndarray::{Array1, Array2, Array3};
@@ -14,7 +12,7 @@ use pyo3::exceptions::{PyException, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyInt};
 
-use crate::{real_array, refused, typed_error, with_model, InvalidInputError, System};
+use crate::{real_array, refused, typed_error, watching, with_model, InvalidInputError, System};
 
 /// The Python exception for a sampler's refusal: a start off M is the
 /// engine's error for it (`NotOnConstraintError`, `NonFiniteError`, ...,
@@ -134,42 +132,13 @@ pub(crate) fn sample<'py>(
         seed,
         density,
     };
+    // The chains stop at their next look when Ctrl-C arrives.
     let stop = AtomicBool::new(false);
-    let (samples, interrupt) = std::thread::scope(|scope| {
-        let (done, finished) = mpsc::channel::<()>();
-        let (stop, starts, options) = (&stop, &starts[..], &options);
-        let run = scope.spawn(move || {
-            let out =
-                with_model!(&system.model, s => sampler::sample_until(s, starts, options, stop));
-            let _ = done.send(());
-            out
-        });
-        // The chains run without the GIL; this thread takes it back every
-        // 50 ms to let Python see a signal, so that Ctrl-C stops the run,
-        // and returns as soon as they end (a sleep of 50 ms between looks
-        // added 25 ms on average to every call, a few per cent of the
-        // SO(3) runs of examples/sampler.py). A panic drops `done`: the
-        // wait ends too.
-        let mut interrupt = None;
-        let mut finished = finished;
-        loop {
-            if interrupt.is_none() {
-                if let Err(e) = py.check_signals() {
-                    stop.store(true, Ordering::Relaxed);
-                    interrupt = Some(e);
-                }
-            }
-            let (rx, seen) = py.detach(move || {
-                let seen = finished.recv_timeout(Duration::from_millis(50));
-                (finished, seen)
-            });
-            finished = rx;
-            if !matches!(seen, Err(mpsc::RecvTimeoutError::Timeout)) {
-                break;
-            }
-        }
-        (run.join(), interrupt)
-    });
+    let (samples, interrupt) = watching(
+        py,
+        &stop,
+        || with_model!(&system.model, s => sampler::sample_until(s, &starts, &options, &stop)),
+    );
     if let Some(e) = interrupt {
         return Err(e);
     }

@@ -98,7 +98,7 @@ def test_bad_numbers_raise_typed_errors_and_change_nothing():
     bad[1, 2] = np.nan
     with pytest.raises(geoshake.NonFiniteError) as e:
         bonds.shake_positions(bad, x)
-    assert "entry 5" in str(e.value) and e.value.member is None
+    assert "entry 5" in str(e.value) and e.value.member is None and e.value.family is None
     np.testing.assert_array_equal(x, before)
     p = np.ones_like(q0)
     p[0, 0] = np.inf
@@ -111,7 +111,7 @@ def test_bad_numbers_raise_typed_errors_and_change_nothing():
     x = np.array([[0.0, 0.0, 0.0], [0.01, 1.5, 0.0]])
     with pytest.raises(geoshake.NewtonError) as e:
         dimer.shake_positions(q0, x)
-    assert isinstance(e.value, geoshake.ShakeError) and e.value.member == 0
+    assert isinstance(e.value, geoshake.ShakeError) and (e.value.family, e.value.member) == ("bond", 0)
     np.testing.assert_array_equal(x, [[0.0, 0.0, 0.0], [0.01, 1.5, 0.0]])
 
 

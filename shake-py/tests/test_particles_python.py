@@ -350,7 +350,7 @@ def test_bad_thermostats_are_refused(args, kwargs, words):
 def test_a_thermostat_is_refused_to_shake_and_must_be_a_langevin(free_dimers):
     masses, bonds, _, _ = dimers(count=2)
     th = geoshake.Langevin(1.0, 1.0)
-    with pytest.raises(geoshake.InvalidInputError, match="Rattle"):
+    with pytest.raises(geoshake.InvalidInputError, match="RATTLE"):
         free_dimers.system(masses, {"bonds": bonds}, h=0.01, method="shake", thermostat=th)
     for bad in (1.0, "langevin", {"friction": 1.0}):
         with pytest.raises(geoshake.InvalidInputError, match="Langevin"):
@@ -557,3 +557,158 @@ def test_the_guide_s_example_runs():
     runs = names["runs"]
     assert len(runs) == 8 and all(r.error is None and r.q.shape == (101, 4, 3) for r in runs)
     assert np.abs(runs[0].p[-1] - runs[1].p[-1]).max() > 0.1
+
+
+class ShiftingArray:
+    """An object that NumPy reads as (members, n, 3) arrays of another
+    number of members on every read."""
+
+    def __init__(self, q, counts):
+        self.q, self.counts = q, list(counts)
+
+    def __array__(self, dtype=None, copy=None):
+        count = self.counts.pop(0) if len(self.counts) > 1 else self.counts[0]
+        return np.stack([self.q] * count)
+
+
+@pytest.mark.parametrize("counts", [(3, 1), (1, 3)])
+def test_members_are_read_once(free_dimers, counts):
+    masses, bonds, q, p = dimers(count=2)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+    q0, p0 = rattle.project(q, p)
+    # The members' count is that of the one read: 3 or 1 states, and the
+    # momenta must agree with it.
+    shifting = ShiftingArray(q0, counts)
+    first = counts[0]
+    runs = rattle.ensemble(shifting, np.stack([p0] * first), 2)
+    assert len(runs) == first and all(r.error is None for r in runs)
+    np.testing.assert_array_equal(runs[0].q, rattle.run(q0, p0, 2).q)
+
+
+def test_arguments_no_state_can_make_right_raise(free_dimers):
+    masses, bonds, q, p = dimers(count=2)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+    q0, p0 = rattle.project(q, p)
+    qs, ps = members(q0, p0, 2)
+    with pytest.raises(geoshake.InvalidInputError, match="stride"):
+        rattle.run(q0, p0, 10, stride=0)
+    with pytest.raises(geoshake.InvalidInputError, match="stride"):
+        rattle.ensemble(qs, ps, 10, stride=0)
+    for t0 in (math.nan, math.inf):
+        with pytest.raises(geoshake.InvalidInputError, match="t0"):
+            rattle.run(q0, p0, 10, t0=t0)
+        with pytest.raises(geoshake.InvalidInputError, match="t0"):
+            rattle.ensemble(qs, ps, 10, t0=t0)
+    # Frames that cannot be stored: raised, with what to do about it.
+    with pytest.raises(geoshake.ShakeError, match="larger stride"):
+        rattle.run(q0, p0, 10**15)
+    with pytest.raises(geoshake.ShakeError, match="larger stride"):
+        rattle.ensemble(qs, ps, 10**15)
+    # A long stride is fine.
+    assert len(rattle.run(q0, p0, 10**15 // 10**13, stride=10)) == 11
+
+
+def test_a_run_s_frames_are_its_states_in_order(free_dimers):
+    """The frames are laid out anew (all q, then all p) from the
+    trajectory's interleaved states: each is the state `step` reaches."""
+    masses, bonds, q, p = dimers(count=3)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+    q0, p0 = rattle.project(q, p)
+    run = rattle.run(q0, p0, 7, stride=2)
+    assert run.q.flags.c_contiguous and run.p.flags.c_contiguous
+    np.testing.assert_array_equal(run.step, [0, 2, 4, 6, 7])
+    stepper = free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+    x, y = q0, p0
+    for k in range(8):
+        if k in run.step:
+            i = list(run.step).index(k)
+            np.testing.assert_array_equal(run.q[i], x)
+            np.testing.assert_array_equal(run.p[i], y)
+        x, y = stepper.step(x, y)
+
+
+def test_energies_of_numbers_that_are_not_finite_raise(free_dimers):
+    masses, bonds, q, p = dimers(count=2)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+    for bad in (np.full(p.shape, np.inf), np.full(p.shape, np.nan), np.full(p.shape, 1e200)):
+        with pytest.raises(geoshake.NonFiniteError, match="kinetic energy"):
+            rattle.kinetic_energy(bad)
+    bad = q.copy()
+    bad[1, 2] = np.nan
+    with pytest.raises(geoshake.NonFiniteError, match="q must be finite"):
+        rattle.potential_energy(bad)
+    assert rattle.potential_energy(q) == 0.0
+
+
+def test_a_mass_whose_inverse_overflows_is_refused(free_dimers):
+    masses, bonds, q, p = dimers(count=2)
+    masses[0] = 5e-324
+    with pytest.raises(geoshake.InvalidInputError, match="inverse"):
+        free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+def test_a_parameter_that_is_not_finite_is_refused(value):
+    with pytest.raises(geoshake.ParameterError, match="stiffness.*finite"):
+        geoshake.declare_particles(TRAPPED, stiffness=value)
+
+
+def test_an_unknown_parameter_of_a_declaration_without_any_says_so():
+    with pytest.raises(geoshake.ParameterError, match="has no parameters"):
+        geoshake.declare_particles(DIMERS, stiffness=1.0)
+
+
+def test_a_thermostat_s_noise_goes_on_when_the_arrays_change(free_dimers):
+    """Positions changed between steps (here by 1e-13, as wrapping them
+    into a box changes their last bits) are a new state, but the step
+    count goes on: the steps stay within round-off of the run's, where a
+    count restarted at 0 would draw step 1's noise again (an O(1)
+    difference in the momenta)."""
+    masses, bonds, q, p = dimers(seed=4)
+    th = geoshake.Langevin(0.5, 1.0, seed=21)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.05, thermostat=th)
+    q0, p0 = rattle.project(q, p)
+    run = rattle.run(q0, p0, 20)
+    stepper = free_dimers.system(masses, {"bonds": bonds}, h=0.05, thermostat=th)
+    qk, pk = q0, p0
+    for k in range(1, 21):
+        qk, pk = stepper.step(qk + 1e-13, pk)
+        assert np.abs(pk - run.p[k]).max() < 1e-9
+        assert np.abs(qk - run.q[k]).max() < 1e-9
+
+
+@pytest.mark.parametrize("call", ["run", "ensemble"])
+def test_ctrl_c_stops_a_run_and_keeps_its_frames(free_dimers, call):
+    """10⁹ steps would take hours; SIGINT half a second in must stop the
+    run within a few seconds, raising KeyboardInterrupt with the frames
+    computed so far attached (`run`, or `runs` for an ensemble)."""
+    import signal
+    import threading
+    import time
+
+    masses, bonds, q, p = dimers(count=2)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.01, tolerance=1e-10)
+    q0, p0 = rattle.project(q, p)
+    # A job started in the background ignores SIGINT: install Python's
+    # handler, or the signal would never arrive.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(0.5, lambda: signal.raise_signal(signal.SIGINT))
+    start = time.perf_counter()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt) as caught:
+            if call == "run":
+                rattle.run(q0, p0, 10**9, stride=10**4)
+            else:
+                qs, ps = members(q0, p0, 2)
+                rattle.ensemble(qs, ps, 10**9, stride=10**4)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+    assert time.perf_counter() - start < 5.0
+    runs = [caught.value.run] if call == "run" else caught.value.runs
+    for run in runs:
+        assert 1 <= len(run) < 10**6 and run.error is None
+        # The frames are the run's: its first is the start.
+        np.testing.assert_array_equal(run.q[0], q0 if call == "run" else run.q[0])
+        assert np.all(np.diff(run.step) > 0)
