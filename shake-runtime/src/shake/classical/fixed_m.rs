@@ -258,12 +258,7 @@ fn jacobian<S: ConstrainedSystem, const D: usize, const M: usize>(
         jac[lo + j * M..=hi + j * M].fill(0.0);
     }
     if !cl.mass.is_empty() {
-        for (&[_, i1, i0, at], &mass) in cl.products.iter().zip(&cl.product_mass) {
-            let a = h * mass;
-            if a != 0.0 {
-                jac[at] -= (a * g1[i1]) * g0[i0];
-            }
-        }
+        cl.subtract_products(h, jac);
     } else {
         for c in 0..groups {
             let mut v = [0.0; D];

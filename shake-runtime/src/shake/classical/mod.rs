@@ -182,15 +182,7 @@ fn jacobian<S: ConstrainedSystem>(
         // and no column groups (a chain: 4 products per variable).
         // (The terms in the band are listed once per system, in the
         // order of this sum: `Buffers::products`.)
-        let cl = &ws.classical;
-        for (&[_, e1, e0, at], &mass) in cl.products.iter().zip(&cl.product_mass) {
-            let a = h * mass;
-            // (h a_k can underflow: such a column adds nothing, even
-            // against an infinite entry of G.)
-            if a != 0.0 {
-                ws.jac[at] -= (a * cl.g1[e1]) * cl.g0[e0];
-            }
-        }
+        ws.classical.subtract_products(h, &mut ws.jac);
         return band_lu_factor(&mut ws.jac, m, band, &mut ws.piv_j)
             .map_err(|_| StepError::from_solve(Stage::Shake, SolveError::Singular { iterations }));
     }

@@ -19,12 +19,14 @@ pub(crate) struct Buffers {
     /// otherwise, or when the classical path does not apply).
     pub(crate) mass: Vec<f64>,
     /// The terms a_k G1(i, k) G0(j, k) of SHAKE's Jacobian that fall in its
-    /// band (A diagonal), in the order the sum takes them: k, the entry of
-    /// `pattern` holding G1(i, k), the one holding G0(j, k), and the entry
-    /// of the Jacobian (i + j m).
-    pub(crate) products: Vec<[usize; 4]>,
-    /// a_k of each term of `products` (read with it, not through k).
-    pub(crate) product_mass: Vec<f64>,
+    /// band (A diagonal), in the order the sum takes them, column k after
+    /// column: the entry of `pattern` holding G1(i, k), the one holding
+    /// G0(j, k), and the entry of the Jacobian (i + j m).
+    pub(crate) products: Vec<[usize; 3]>,
+    /// For each column k with terms, in increasing k: a_k, and where its
+    /// terms end in `products` (they start where the previous column's
+    /// end), so that h a_k is formed and tested once per column.
+    pub(crate) product_columns: Vec<(f64, usize)>,
     /// G0 = G(q0) and G1 = G at the last Jacobian's q1, packed: entry e of
     /// each is ∂g_i/∂q_k for (i, k) = `pattern[e]` (`packed_jacobian`).
     pub(crate) g0: Vec<f64>,
@@ -87,7 +89,14 @@ impl Buffers {
             mass.clear();
         }
         let products = products.unwrap_or_default();
-        let product_mass = products.iter().map(|t| mass[t[0]]).collect();
+        let mut product_columns: Vec<(f64, usize)> = Vec::new();
+        for (n, t) in products.iter().enumerate() {
+            match product_columns.last_mut() {
+                Some((_, end)) if products[n - 1][0] == t[0] => *end = n + 1,
+                _ => product_columns.push((mass[t[0]], n + 1)),
+            }
+        }
+        let products = products.iter().map(|t| [t[1], t[2], t[3]]).collect();
         Buffers {
             group: pattern.iter().map(|&(i, _)| i % groups).collect(),
             g0: vec![0.0; pattern.len()],
@@ -96,7 +105,7 @@ impl Buffers {
             pattern,
             mass,
             products,
-            product_mass,
+            product_columns,
             kick: vec![0.0; d],
             u: vec![0.0; d],
             v: vec![0.0; d],
@@ -109,6 +118,30 @@ impl Buffers {
             } else {
                 Vec::new()
             },
+        }
+    }
+}
+
+impl Buffers {
+    /// jac ← jac − h Σ_k a_k G1[:, k] G0[:, k]ᵀ over the terms of
+    /// `products` (A diagonal), in their order, each (h a_k G1(i, k))
+    /// G0(j, k): the Jacobian's sum of outer products of G's sparse
+    /// columns, for every classical kernel (slice and fixed-size).
+    #[inline(always)]
+    pub(crate) fn subtract_products(&self, h: f64, jac: &mut [f64]) {
+        let (g0, g1) = (&self.g0, &self.g1);
+        let mut start = 0;
+        for &(mass, end) in &self.product_columns {
+            let terms = &self.products[start..end];
+            start = end;
+            let a = h * mass;
+            // (h a_k can underflow: such a column adds nothing, even
+            // against an infinite entry of G.)
+            if a != 0.0 {
+                for &[e1, e0, at] in terms {
+                    jac[at] -= (a * g1[e1]) * g0[e0];
+                }
+            }
         }
     }
 }
