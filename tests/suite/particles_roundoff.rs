@@ -4,6 +4,7 @@
 //! Newton iterations accept a stalled residual there (reporting it as it
 //! is) instead of spending their budget and failing.
 
+use geoshake::declared::DeclaredParticles;
 use geoshake::runtime::particles::{
     generate, stencils::Distance, Options, ParticleState, ParticleSystem, Rattle, SolverChoice,
     Table,
@@ -139,5 +140,83 @@ fn a_projection_reports_the_residual_at_its_own_scale() {
             reported >= 0.5 * actual,
             "reported {reported:e}, bond error {actual:e}"
         );
+    }
+}
+
+/// The dimer of the string declaration (a tape stencil), as from Python.
+const DIMER: &str = "struct Dimer {
+    particles x[3];
+    constraints { bond[k in bonds(a, b; length)]: norm2(x[a] - x[b]) - length^2 }
+}";
+
+/// A free dimer (masses 2 and 1, a bond of 1, RATTLE at h = 0.02, the
+/// default tolerance 1e-12) turning in the plane at 10⁴, 10⁵ and 10⁶ from
+/// the origin. Once its axis is a degree off the x axis, Newton's update
+/// along the bond is below half an ulp of the large x coordinates and is
+/// lost; only the small y coordinates move, by the ≈ 2 % of ∇g they carry,
+/// and the residual creeps down by a few 1e-4 per iteration without ever
+/// failing to go down: the budget ran out (step 10 at 10⁴, step 2 at 10⁶)
+/// at a residual far inside the round-off floor. Every step must pass, by
+/// the fixed-size kernel and by the general one, for the hand-written
+/// stencil and the declared one, with the bond at its coordinates'
+/// round-off.
+#[test]
+fn a_turning_dimer_far_from_the_origin_runs_with_its_bond_at_round_off() {
+    let d = 1.0;
+    for x in [1e4, 1e5, 1e6] {
+        for declared in [false, true] {
+            for general in [false, true] {
+                let mut bond = Table::new(2, 1);
+                bond.push(&[0, 1], &[d]).unwrap();
+                let masses = vec![2.0, 1.0];
+                let system = if declared {
+                    let dimer = DeclaredParticles::new(DIMER, &[]).unwrap();
+                    dimer.system(masses, vec![bond]).unwrap()
+                } else {
+                    ParticleSystem::new(3, masses)
+                        .unwrap()
+                        .with_constraints("bond", Distance::<3>, bond)
+                        .unwrap()
+                };
+                let mut rattle = Rattle::new(system, 0.02, Options::default()).unwrap();
+                if general {
+                    rattle.use_general_cluster_kernel();
+                }
+                let mut state = ParticleState::new(
+                    vec![x, 0.0, 0.0, x + d, 0.0, 0.0],
+                    vec![0.0, 0.0, 0.0, 0.0, 0.1, 0.0],
+                );
+                rattle.project(&mut state).unwrap();
+                let tol = rattle.options().tol;
+                for step in 1..=2000 {
+                    let info = rattle.step(&mut state).unwrap_or_else(|e| {
+                        panic!("x = {x:e}, declared {declared}, general {general}: {e}")
+                    });
+                    let q = state.q();
+                    let norm = |a: &[f64]| a.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    let xmax = norm(&q[..3]).max(norm(&q[3..]));
+                    // The stall is accepted at the floor 4ε ‖x_member‖ /
+                    // extent (`tolerance::roundoff_floor`). For a dimer the
+                    // relative residual | |r|² − d² | / (|∇g| · extent),
+                    // with |∇g| = 2√2 |r| and extent = |r| / √2, is
+                    // | |r| − d | / d to first order, and ‖x_member‖ ≤
+                    // √2 · xmax: so the bond error is at most
+                    // 4ε · √2 xmax · √2 / d = 8ε xmax / d, plus the few ε
+                    // of measuring |r| below (its differences are exact or
+                    // of small coordinates), far inside it here.
+                    let bound = 8.0 * f64::EPSILON * xmax / d;
+                    assert!(tol < bound, "the floor must be above the tolerance");
+                    let r = ((q[0] - q[3]).powi(2) + (q[1] - q[4]).powi(2) + (q[2] - q[5]).powi(2))
+                        .sqrt();
+                    let err = (r - d).abs() / d;
+                    assert!(
+                        err <= bound && info.residual.unwrap() <= bound,
+                        "x = {x:e}, declared {declared}, general {general}, step {step}: \
+                         bond error {err:e}, residual {:?}, bound {bound:e}",
+                        info.residual
+                    );
+                }
+            }
+        }
     }
 }

@@ -50,8 +50,9 @@ pub struct Options {
     /// compares equal accuracy. Far from the origin the coordinates may
     /// not resolve it (a member's residual cannot go below about
     /// 4ε ‖x‖ / extent, ≈ 3e-9 for a bond of 1 at 10⁶): there an
-    /// iteration that stops going down with every member within `tol` or
-    /// that floor is accepted, and the step reports the residual reached.
+    /// iteration whose residual no longer halves (it stalls, wanders or
+    /// creeps down by rounding) with every member within `tol` or that
+    /// floor is accepted, and the step reports the residual reached.
     /// In [4ε, 1): below
     /// [`MIN_RELATIVE_TOLERANCE`](crate::validate::MIN_RELATIVE_TOLERANCE)
     /// = 4ε rounding alone can keep the residual above the tolerance, and
