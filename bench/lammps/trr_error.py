@@ -13,6 +13,9 @@ import struct
 import sys
 import numpy as np
 
+# The same measure as LAMMPS' (this script's directory is on sys.path).
+from dump_error import water_errors
+
 R_OH = 0.1
 R_HH = 2.0 * R_OH * np.sin(np.deg2rad(109.47) / 2.0)
 TRR_MAGIC = 1993
@@ -65,17 +68,7 @@ def main():
     if last is None:
         sys.exit(f"trr_error.py: {sys.argv[1]}: no frame with both x and v")
     box, x, v, size = last
-    L = np.diag(box)
-    o, h1, h2 = x[0::3], x[1::3], x[2::3]
-    vo, vh1, vh2 = v[0::3], v[1::3], v[2::3]
-    err, vel = 0.0, 0.0
-    for a, b, va, vb, l in ((o, h1, vo, vh1, R_OH), (o, h2, vo, vh2, R_OH), (h1, h2, vh1, vh2, R_HH)):
-        r = a - b
-        r -= L * np.round(r / L)
-        dv = va - vb
-        rn = np.linalg.norm(r, axis=1)
-        err = max(err, np.max(np.abs(rn - l) / l))
-        vel = max(vel, np.max(np.abs((r * dv).sum(1)) / (rn * np.maximum(np.linalg.norm(dv, axis=1), 1e-300))))
+    err, vel = water_errors(x, v, R_OH, R_HH, box=np.diag(box))
     print(f"max_rel_length_error={err:.2e} max_rel_velocity={vel:.2e} precision={'double' if size == 8 else 'single'}")
 
 
