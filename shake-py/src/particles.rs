@@ -843,32 +843,23 @@ impl ParticleRattle {
         Ok((flat, rows))
     }
 
-    /// A (members, n, D) array, one flat (n·D) vector per member.
+    /// A (members, n, D) array, one flat (n·D) vector per member: read
+    /// once (by `real_array`), so that an object whose `__array__` answers
+    /// differently on a second call cannot give the shape of one answer
+    /// and the numbers of another.
     fn members(&self, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Vec<f64>>> {
         let (n, d) = (self.particles, self.dim);
-        let np = obj.py().import("numpy")?;
-        // Read once: an object whose `__array__` answers differently on a
-        // second call must not give the shape of one answer and the
-        // numbers of another.
-        let array = np.call_method1("asarray", (obj,)).map_err(|e| {
-            refused(obj.py(), e, |e| {
-                format!(
-                    "{name} must be an array of real numbers of shape (members, {n}, {d}): {}",
-                    e.value(obj.py())
-                )
-            })
-        })?;
-        let shape: Vec<usize> = array.getattr("shape")?.extract()?;
-        if shape.len() != 3 || shape[1] != n || shape[2] != d {
+        let (flat, members) = real_array(obj, name, 3, d, "D")?;
+        let size = n * d;
+        if flat.len() != members * size {
             return Err(InvalidInputError::new_err(format!(
                 "{name} must have shape (members, {n}, {d}): a state of n = {n} particles in \
-                 R^{d} per member, not {shape:?}"
+                 R^{d} per member, not ({members}, {}, {d})",
+                flat.len() / (members * d).max(1)
             )));
         }
-        let (flat, _) = real_array(&array, name, 3, d, "D")?;
-        let size = n * d;
         if size == 0 {
-            return Ok(vec![Vec::new(); shape[0]]);
+            return Ok(vec![Vec::new(); members]);
         }
         Ok(flat.chunks_exact(size).map(<[f64]>::to_vec).collect())
     }

@@ -691,6 +691,7 @@ def test_ctrl_c_stops_a_run_and_keeps_its_frames(free_dimers, call):
     q0, p0 = rattle.project(q, p)
     # A job started in the background ignores SIGINT: install Python's
     # handler, or the signal would never arrive.
+    qs, ps = members(q0, p0, 2)
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, lambda: signal.raise_signal(signal.SIGINT))
     start = time.perf_counter()
@@ -700,15 +701,17 @@ def test_ctrl_c_stops_a_run_and_keeps_its_frames(free_dimers, call):
             if call == "run":
                 rattle.run(q0, p0, 10**9, stride=10**4)
             else:
-                qs, ps = members(q0, p0, 2)
                 rattle.ensemble(qs, ps, 10**9, stride=10**4)
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, previous)
     assert time.perf_counter() - start < 5.0
     runs = [caught.value.run] if call == "run" else caught.value.runs
-    for run in runs:
-        assert 1 <= len(run) < 10**6 and run.error is None
-        # The frames are the run's: its first is the start.
-        np.testing.assert_array_equal(run.q[0], q0 if call == "run" else run.q[0])
-        assert np.all(np.diff(run.step) > 0)
+    starts = [q0] if call == "run" else list(qs)
+    assert len(runs) == len(starts)
+    for run, start in zip(runs, starts):
+        # Stopped early, with the frames so far: the first is the start,
+        # the steps increase, each of them a step of that run.
+        assert 2 <= len(run) < 10**5 and run.error is None
+        np.testing.assert_array_equal(run.q[0], start)
+        assert np.all(np.diff(run.step) > 0) and run.step[-1] < 10**9
