@@ -12,6 +12,7 @@ use geoshake::{StepError, StepInfo};
 use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadwriteArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use crate::whole::Whole;
 use crate::{refused, typed_error, InvalidInputError};
 
 /// Distance constraints |x_a − x_b| = l between atoms in R³ with masses:
@@ -116,15 +117,16 @@ impl Bonds {
     /// or length not finite and positive, or a molecule with more bonds
     /// than coordinates raise `InvalidInputError`.
     #[new]
-    #[pyo3(signature = (masses, pairs, lengths, *, tolerance=1e-13, max_iterations=50))]
+    #[pyo3(signature = (masses, pairs, lengths, *, tolerance=1e-13, max_iterations=Whole::Fits(50)))]
     fn new(
         py: Python<'_>,
         masses: Vec<f64>,
         pairs: Vec<[i64; 2]>,
         lengths: Vec<f64>,
         tolerance: f64,
-        max_iterations: usize,
+        max_iterations: Whole,
     ) -> PyResult<Self> {
+        let max_iterations = max_iterations.count("max_iterations", 0)?;
         if pairs.len() != lengths.len() {
             return Err(InvalidInputError::new_err(format!(
                 "{} pairs but {} lengths",

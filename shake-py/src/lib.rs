@@ -10,6 +10,7 @@ mod models;
 mod particles;
 mod sampler;
 mod thermostat;
+mod whole;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -27,6 +28,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use whole::Whole;
 
 create_exception!(
     _geoshake,
@@ -548,17 +550,22 @@ fn run_all(model: &Model, base: &str, plan: &Plan, z0s: &[Vec<f64>]) -> Vec<RunO
 fn plan(
     system: &System,
     h: f64,
-    steps: Option<u64>,
+    steps: Option<Whole>,
     time: Option<f64>,
     method: &str,
     base: &str,
-    stride: u64,
+    stride: Whole,
     project: bool,
     multipliers: bool,
     constraint_tolerance: Option<f64>,
     newton_tolerance: Option<f64>,
-    max_iterations: Option<usize>,
+    max_iterations: Option<Whole>,
 ) -> PyResult<Plan> {
+    let steps = steps.map(|n| n.within("steps", 0, u64::MAX)).transpose()?;
+    let stride = stride.within("stride", 0, u64::MAX)?;
+    let max_iterations = max_iterations
+        .map(|n| n.count("max_iterations", 0))
+        .transpose()?;
     let stop = match (steps, time) {
         (Some(n), None) => Stop::Steps(n),
         (None, Some(t)) => Stop::Time(t),
@@ -736,7 +743,7 @@ fn rows(system: &System, z: &[f64], n: usize) -> PyResult<Vec<Vec<f64>>> {
 /// `ShakeError` carrying the step, time, residual and partial trajectory.
 #[pyfunction]
 #[pyo3(signature = (system, z0, h, *, steps=None, time=None, method="rattle", base="midpoint",
-    stride=1, project=true, multipliers=true, constraint_tolerance=None, newton_tolerance=None,
+    stride=Whole::Fits(1), project=true, multipliers=true, constraint_tolerance=None, newton_tolerance=None,
     max_iterations=None))]
 #[allow(clippy::too_many_arguments)]
 fn run(
@@ -744,16 +751,16 @@ fn run(
     system: &System,
     z0: &Bound<'_, PyAny>,
     h: f64,
-    steps: Option<u64>,
+    steps: Option<Whole>,
     time: Option<f64>,
     method: &str,
     base: &str,
-    stride: u64,
+    stride: Whole,
     project: bool,
     multipliers: bool,
     constraint_tolerance: Option<f64>,
     newton_tolerance: Option<f64>,
-    max_iterations: Option<usize>,
+    max_iterations: Option<Whole>,
 ) -> PyResult<Result_> {
     let plan = plan(
         system,
@@ -787,7 +794,7 @@ fn run(
 /// default, `errors="raise"`, raises the first failure).
 #[pyfunction]
 #[pyo3(signature = (system, z0s, h, *, steps=None, time=None, method="rattle", base="midpoint",
-    stride=1, project=true, multipliers=true, constraint_tolerance=None, newton_tolerance=None,
+    stride=Whole::Fits(1), project=true, multipliers=true, constraint_tolerance=None, newton_tolerance=None,
     max_iterations=None, errors="raise"))]
 #[allow(clippy::too_many_arguments)]
 fn ensemble(
@@ -795,16 +802,16 @@ fn ensemble(
     system: &System,
     z0s: &Bound<'_, PyAny>,
     h: f64,
-    steps: Option<u64>,
+    steps: Option<Whole>,
     time: Option<f64>,
     method: &str,
     base: &str,
-    stride: u64,
+    stride: Whole,
     project: bool,
     multipliers: bool,
     constraint_tolerance: Option<f64>,
     newton_tolerance: Option<f64>,
-    max_iterations: Option<usize>,
+    max_iterations: Option<Whole>,
     errors: &str,
 ) -> PyResult<Vec<Py<PyAny>>> {
     let plan = plan(

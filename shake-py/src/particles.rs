@@ -22,6 +22,7 @@ use pyo3::types::PyDict;
 use crate::bonds::{error, topology};
 use crate::forces::{self, type_name, PyForces};
 use crate::thermostat::Langevin;
+use crate::whole::Whole;
 use crate::{
     declare_error, keyword_parameters, real_array, refused, watching, InvalidInputError,
     NonFiniteError,
@@ -140,7 +141,7 @@ impl DeclaredParticles {
         h: f64,
         method: &str,
         tolerance: Option<f64>,
-        max_iterations: Option<usize>,
+        max_iterations: Option<Whole>,
         forces: Option<&Bound<'_, PyAny>>,
         thermostat: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<ParticleRattle> {
@@ -181,7 +182,10 @@ impl DeclaredParticles {
         let defaults = Options::default();
         let options = Options {
             tol: tolerance.unwrap_or(defaults.tol),
-            max_iter: max_iterations.unwrap_or(defaults.max_iter),
+            max_iter: match max_iterations {
+                Some(n) => n.count("max_iterations", 0)?,
+                None => defaults.max_iter,
+            },
             method,
             ..defaults
         };
@@ -342,7 +346,9 @@ fn same(a: &ParticleState, b: &ParticleState) -> bool {
 /// The arguments of `run` and `ensemble` that no state can make right,
 /// refused before any work: a run of them would be an empty run carrying
 /// an error that a caller who does not look at `error` never sees.
-fn run_arguments(stride: u64, t0: f64) -> PyResult<()> {
+fn run_arguments(steps: Whole, stride: Whole, t0: f64) -> PyResult<(u64, u64)> {
+    let steps = steps.within("steps", 0, u64::MAX)?;
+    let stride = stride.within("stride", 0, u64::MAX)?;
     if stride == 0 {
         return Err(InvalidInputError::new_err(
             "stride must be at least 1 (1 keeps every frame), not 0",
@@ -353,7 +359,7 @@ fn run_arguments(stride: u64, t0: f64) -> PyResult<()> {
             "t0 must be finite, not {t0}"
         )));
     }
-    Ok(())
+    Ok((steps, stride))
 }
 
 /// The exception for an error `e` of a step or a run on this thread: the
@@ -565,17 +571,17 @@ impl ParticleRattle {
     /// the seed and k (counted from the run's start): a run continued from
     /// another's last frame needs another seed (`Langevin.member`) not to
     /// repeat the first run's noise.
-    #[pyo3(signature = (q, p, steps, *, stride=1, t0=0.0))]
+    #[pyo3(signature = (q, p, steps, *, stride=Whole::Fits(1), t0=0.0))]
     fn run(
         &self,
         py: Python<'_>,
         q: &Bound<'_, PyAny>,
         p: &Bound<'_, PyAny>,
-        steps: u64,
-        stride: u64,
+        steps: Whole,
+        stride: Whole,
         t0: f64,
     ) -> PyResult<ParticleRun> {
-        run_arguments(stride, t0)?;
+        let (steps, stride) = run_arguments(steps, stride, t0)?;
         let state = self.state(q, p)?.with_time(t0);
         let mut solver = self.solver(py)?;
         let r = &mut solver.rattle;
@@ -609,17 +615,17 @@ impl ParticleRattle {
     /// `thermostat.member(i)` (member 0 with the thermostat itself). A
     /// forces callable is called from several threads, one call at a time
     /// (under the interpreter's lock).
-    #[pyo3(signature = (qs, ps, steps, *, stride=1, t0=0.0))]
+    #[pyo3(signature = (qs, ps, steps, *, stride=Whole::Fits(1), t0=0.0))]
     fn ensemble(
         &self,
         py: Python<'_>,
         qs: &Bound<'_, PyAny>,
         ps: &Bound<'_, PyAny>,
-        steps: u64,
-        stride: u64,
+        steps: Whole,
+        stride: Whole,
         t0: f64,
     ) -> PyResult<Vec<ParticleRun>> {
-        run_arguments(stride, t0)?;
+        let (steps, stride) = run_arguments(steps, stride, t0)?;
         let qs = self.members(qs, "qs")?;
         let ps = self.members(ps, "ps")?;
         if qs.len() != ps.len() {

@@ -8,10 +8,11 @@ use std::sync::atomic::AtomicBool;
 use geoshake::runtime::sampler::{self, Density, SamplerError, SamplerOptions, Samples};
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::IntoPyArray;
-use pyo3::exceptions::{PyException, PyTypeError};
+use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict, PyInt};
+use pyo3::types::PyDict;
 
+use crate::whole::Whole;
 use crate::{real_array, refused, typed_error, watching, with_model, InvalidInputError, System};
 
 /// The Python exception for a sampler's refusal: a start off M is the
@@ -84,10 +85,10 @@ pub(crate) fn sample<'py>(
     seed: Whole,
     density: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let chains = chains.within("chains", 0, usize::MAX as u64)? as usize;
-    let draws = draws.within("draws", 0, usize::MAX as u64)? as usize;
-    let warmup = warmup.within("warmup", 0, usize::MAX as u64)? as usize;
-    let steps = steps.within("steps", 0, usize::MAX as u64)? as usize;
+    let chains = chains.count("chains", 0)?;
+    let draws = draws.count("draws", 0)?;
+    let warmup = warmup.count("warmup", 0)?;
+    let steps = steps.count("steps", 0)?;
     let seed = seed.within("seed", 0, u64::MAX)?;
     let max_tree_depth = max_tree_depth
         .map(|k| k.within("max_tree_depth", 1, 20).map(|k| k as u32))
@@ -146,47 +147,6 @@ pub(crate) fn sample<'py>(
         .map_err(|_| InvalidInputError::new_err("the sampler's thread panicked"))?
         .map_err(|e| error(py, &e))?;
     arrays(py, &samples)
-}
-
-/// A Python int option as it came: one that fits in a u64, or the text of
-/// one that does not. Converting straight to an unsigned Rust integer
-/// would raise OverflowError for −1 or 2**70, not the package's error
-/// naming the option; a float or a bool is refused as a TypeError.
-pub(crate) enum Whole {
-    Fits(u64),
-    Outside(String),
-}
-
-impl<'py> FromPyObject<'_, 'py> for Whole {
-    type Error = PyErr;
-
-    fn extract(obj: Borrowed<'_, 'py, PyAny>) -> PyResult<Self> {
-        if obj.is_instance_of::<PyBool>() || !obj.is_instance_of::<PyInt>() {
-            return Err(PyTypeError::new_err(format!(
-                "an integer is required, not {}",
-                obj.get_type().name()?
-            )));
-        }
-        Ok(match obj.extract::<u64>() {
-            Ok(v) => Whole::Fits(v),
-            Err(_) => Whole::Outside(obj.str()?.to_string()),
-        })
-    }
-}
-
-impl Whole {
-    /// The value, or the package's error naming `what` when it is
-    /// outside [lo, hi].
-    fn within(self, what: &str, lo: u64, hi: u64) -> PyResult<u64> {
-        let text = match self {
-            Whole::Fits(v) if (lo..=hi).contains(&v) => return Ok(v),
-            Whole::Fits(v) => v.to_string(),
-            Whole::Outside(text) => text,
-        };
-        Err(InvalidInputError::new_err(format!(
-            "invalid sampler option `{what}` = {text}: an integer from {lo} to {hi}"
-        )))
-    }
 }
 
 /// The draws and their summary as a dict of NumPy arrays.

@@ -127,6 +127,7 @@ def test_bad_numbers_raise_typed_errors_and_change_nothing():
         (([1.0, 1.0], [(0, 1)], [1.0, 2.0]), {}, "1 pairs but 2 lengths"),
         (([1.0, 1.0], [(0, 1)], [1.0]), {"tolerance": 1e-17}, "tol"),
         (([1.0, 1.0], [(0, 1)], [1.0]), {"max_iterations": 0}, "max_iter"),
+        (([1.0, 1.0], [(0, 1)], [1.0]), {"max_iterations": -1}, "`max_iterations` = -1"),
         # Every pair of 8 atoms: 28 bonds on 24 coordinates.
         (
             ([1.0] * 8, [(a, b) for a in range(8) for b in range(a)], [1.0] * 28),

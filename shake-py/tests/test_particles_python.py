@@ -594,6 +594,15 @@ def test_arguments_no_state_can_make_right_raise(free_dimers):
         rattle.run(q0, p0, 10, stride=0)
     with pytest.raises(geoshake.InvalidInputError, match="stride"):
         rattle.ensemble(qs, ps, 10, stride=0)
+    # Negative or past a u64: the package's error naming the count (it was
+    # Python's OverflowError).
+    for steps, stride, says in ((-1, 1, "`steps` = -1"), (10, -2, "`stride` = -2"), (2**64, 1, "`steps`")):
+        with pytest.raises(geoshake.InvalidInputError, match=says):
+            rattle.run(q0, p0, steps, stride=stride)
+        with pytest.raises(geoshake.InvalidInputError, match=says):
+            rattle.ensemble(qs, ps, steps, stride=stride)
+    with pytest.raises(geoshake.InvalidInputError, match="`max_iterations` = -1"):
+        free_dimers.system(masses, {"bonds": bonds}, h=0.01, max_iterations=-1)
     for t0 in (math.nan, math.inf):
         with pytest.raises(geoshake.InvalidInputError, match="t0"):
             rattle.run(q0, p0, 10, t0=t0)

@@ -251,6 +251,31 @@ def test_unknown_option_values_are_refused():
         geoshake.ensemble(sys, np.zeros(4), 0.01, steps=5)
 
 
+@pytest.mark.parametrize(
+    "kw, says",
+    [
+        ({"steps": -1}, "`steps` = -1"),
+        ({"steps": 2**64}, "`steps` = 18446744073709551616"),
+        ({"steps": 5, "stride": -1}, "`stride` = -1"),
+        ({"steps": 5, "max_iterations": -3}, "`max_iterations` = -3"),
+    ],
+)
+def test_counts_out_of_range_are_the_packages_error_naming_them(kw, says):
+    # -1 was Python's OverflowError from the conversion to an unsigned
+    # integer, not an error of the package, and did not name the argument.
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.0, 0.0])
+    for call in (
+        lambda: geoshake.rattle(sys, z0, 0.01, **kw),
+        lambda: geoshake.ensemble(sys, z0[None, :], 0.01, **kw),
+    ):
+        with pytest.raises(geoshake.InvalidInputError) as info:
+            call()
+        assert says in str(info.value), str(info.value)
+    with pytest.raises(TypeError):
+        geoshake.rattle(sys, z0, 0.01, steps=2.0)
+
+
 def test_a_constant_outside_a_function_domain_is_a_declaration_error():
     # sqrt(-1) in H was accepted, and H was NaN at every state.
     with pytest.raises(geoshake.DeclarationError) as info:
