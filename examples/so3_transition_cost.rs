@@ -9,7 +9,8 @@
 //! valgrind --tool=callgrind target/release/examples/so3_transition_cost static
 //! ```
 //!
-//! Prints the transitions, the steps taken and a checksum of the draws
+//! Prints the transitions, the steps taken, the draws' rejections by the
+//! reverse check and by a failed solve, and a checksum of the draws
 //! (FNV-1a over their bits, acceptance probabilities and step counts), so
 //! that two builds can be compared for bit-identical chains; instructions
 //! per transition are callgrind's total over the transitions printed (the
@@ -17,10 +18,12 @@
 //! `static|dynamic [warmup draws [variant]]`, the variant `tape` (the
 //! default) or `compiled` (the same system from `constrained_system!`,
 //! the sampler example's `Rotation`). `TAPES=1` prints the size of each
-//! tape.
+//! tape; `STEP_TOLERANCE=1e-9` sets the solves' Newton step tolerance
+//! (`SamplerOptions::newton`; the default is round-off).
 
 use geoshake::declared::DeclaredSystem;
 use geoshake::sampler::{sample, SamplerOptions, Samples};
+use geoshake::NewtonOptions;
 
 #[path = "sampler/targets.rs"]
 #[allow(dead_code)]
@@ -60,6 +63,13 @@ fn main() {
         steps: 10,
         max_tree_depth: dynamic.then_some(10),
         seed: 1,
+        newton: NewtonOptions {
+            step_tolerance: std::env::var("STEP_TOLERANCE")
+                .map_or(NewtonOptions::default().step_tolerance, |s| {
+                    s.parse().unwrap()
+                }),
+            ..NewtonOptions::default()
+        },
         ..SamplerOptions::default()
     };
     let s: Samples = if variant == "compiled" {
@@ -94,10 +104,13 @@ fn main() {
     s.steps.iter().for_each(|&n| mix(n as u64));
     let steps: usize = s.steps.iter().sum();
     let accepted = s.accepted.iter().filter(|&&a| a).count();
+    let rejected = s.rejections(0);
     println!(
-        "so3 integration={} transitions={} draw_steps={steps} accepted={accepted} step_size={:e} checksum={hash:016x}",
+        "so3 integration={} transitions={} draw_steps={steps} accepted={accepted} step_size={:e} checksum={hash:016x} rejected_reverse={} rejected_newton={}",
         if dynamic { "dynamic" } else { "static" },
         warmup + draws,
         s.step_size[0],
+        rejected.reverse,
+        rejected.newton,
     );
 }

@@ -132,6 +132,7 @@ pub(crate) fn sample<'py>(
         reverse_tolerance,
         seed,
         density,
+        ..SamplerOptions::default()
     };
     // The chains stop at their next look when Ctrl-C arrives.
     let stop = AtomicBool::new(false);

@@ -20,7 +20,10 @@
 //!    iterations cannot improve x.
 //!
 //! Newton converges quadratically, so both happen within one or two
-//! iterations of the first one at round-off. If neither happens within
+//! iterations of the first one at round-off. Simplified Newton may also
+//! stop one update earlier, when the contraction shows that the update
+//! rule 1 waits for would be below its tolerance (rule 3, "Stopping on
+//! the contraction" below). If none happens within
 //! `max_iterations`, the step fails with a typed error carrying the residual.
 //!
 //! # Simplified Newton
@@ -46,6 +49,27 @@
 //! result is as close to round-off as plain Newton's, and the noise floor
 //! is recognised without a coin toss on every refresh.
 //!
+//! # Stopping on the contraction
+//!
+//! Rule 1 stops on an update that no longer changes x, so the last update
+//! of an iteration only confirms the iterate before it: a residual, a
+//! solve, sometimes a Jacobian, for nothing. Simplified Newton predicts it
+//! instead (Hairer & Wanner, *Solving ODEs II*, IV.8; Deuflhard): with
+//! θ = ‖Δ_k‖/‖Δ_{k−1}‖, the error left in x after a frozen Jacobian's
+//! update is about θ/(1 − θ) ‖Δ_k‖, and after an update with a fresh one
+//! (Newton proper, e_k ≈ C e_{k−1}², e_{k−1} ≈ ‖Δ_k‖, C at most
+//! ‖Δ_k‖/‖Δ_{k−1}‖²) about θ² ‖Δ_k‖. Rule 3 stops when that estimate is
+//! below 4ε‖x‖ (`step_tolerance`, not a caller's floor: the error left
+//! must be the one rule 1 accepts), for a contraction θ < ½ of updates
+//! already below the stagnation threshold, so that x is at round-off as
+//! by rule 1. The same θ² is the rate at which a Jacobian kept after a
+//! fresh update goes on contracting (its error is the size of that
+//! update), which is what the refresh horizon below is judged by. An
+//! update that follows a caller's jump to a closed-form root
+//! (`Monitor::jump`) has no rate: its ratio to the jump says how good the
+//! root was, not how fast the Jacobian contracts, and neither use is made
+//! of it.
+//!
 //! A caller that knows the round-off level of x itself (classical SHAKE:
 //! the floor of g seen through J⁻¹, `Monitor::set_floor`) stops on an
 //! update below it as on rule 1; a caller that moves x by a closed-form
@@ -61,9 +85,10 @@
 //! contract at θ ≈ 0.2 and took 13–20 updates per step, where Newton's
 //! quadratic convergence with a fresh Jacobian per update takes a few.
 //! Such a caller sets a horizon k (`Monitor::refresh_beyond`): the frozen
-//! Jacobian is kept only while ‖Δ‖ θ^k, the update its contraction would
-//! reach k updates on, is below the tolerance; otherwise a fresh one is
-//! asked for. Small steps, where θ is 10⁻³ or less, keep theirs.
+//! Jacobian is kept only while ‖Δ‖ θ^k (θ² after a fresh update, above),
+//! the update its contraction would reach k updates on, is below the
+//! tolerance; otherwise a fresh one is asked for. Small steps, where θ is
+//! 10⁻³ or less, keep theirs.
 //!
 //! # Iterations judged by their residual
 //!
@@ -158,6 +183,9 @@ pub(crate) struct Monitor {
     jacobian_near: bool,
     /// The round-off level of x, when the caller knows it (0 otherwise).
     floor: f64,
+    /// The previous step was a [`jump`](Self::jump): the next update's
+    /// ratio to it is no contraction rate.
+    after_jump: bool,
     /// Simplified Newton whose Jacobian costs about a residual: keep a
     /// frozen Jacobian only while its contraction reaches the tolerance
     /// within this many more updates (`None`: whenever it quarters).
@@ -172,6 +200,7 @@ impl Monitor {
             prev_step: f64::INFINITY,
             jacobian_near: false,
             floor: 0.0,
+            after_jump: false,
             horizon: None,
             iterations: 0,
         }
@@ -199,6 +228,7 @@ impl Monitor {
     pub(crate) fn jump(&mut self, step: f64) {
         self.iterations += 1;
         self.prev_step = step;
+        self.after_jump = true;
     }
 
     /// Called after each update with ‖Δx‖ and the updated ‖x‖ (∞-norms).
@@ -223,7 +253,9 @@ impl Monitor {
         self.iterations += 1;
         let prev = self.prev_step;
         self.prev_step = step;
-        if step <= (self.opts.step_tolerance * x).max(self.floor) {
+        let after_jump = std::mem::take(&mut self.after_jump);
+        let target = (self.opts.step_tolerance * x).max(self.floor);
+        if step <= target {
             return Verdict::Converged;
         }
         let tiny = step <= self.opts.stagnation_threshold * x.max(1.0);
@@ -233,12 +265,32 @@ impl Monitor {
         if step > 0.5 * prev && tiny && (fresh || self.jacobian_near) {
             return Verdict::Converged;
         }
-        if step <= 0.25 * prev {
-            let target = (self.opts.step_tolerance * x).max(self.floor);
-            let theta = step / prev;
-            if self.horizon.is_none_or(|k| step * theta.powi(k) <= target) {
-                return Verdict::Continue;
+        // θ = 0 after the first update (prev = ∞): nothing to judge by.
+        let theta = step / prev;
+        // The rate a frozen Jacobian goes on contracting at: θ, or θ² after
+        // an update made with a fresh one (module docs, "Stopping on the
+        // contraction"). After a jump to a closed-form root θ is no rate:
+        // the jump removed most of an error the frozen Jacobian would not.
+        let rate = if fresh && !after_jump {
+            theta * theta
+        } else {
+            theta
+        };
+        // Rule 3: the error left in x, estimated from the contraction, is
+        // already below rule 1's tolerance; the update that would confirm
+        // it is not taken.
+        if tiny && !after_jump && theta > 0.0 && theta < 0.5 {
+            let left = if fresh {
+                rate * step
+            } else {
+                theta / (1.0 - theta) * step
+            };
+            if left <= self.opts.step_tolerance * x {
+                return Verdict::Converged;
             }
+        }
+        if step <= 0.25 * prev && self.horizon.is_none_or(|k| step * rate.powi(k) <= target) {
+            return Verdict::Continue;
         }
         // The Jacobian the caller evaluates now is at an iterate whose
         // update was already tiny: it is from the quadratic regime.
@@ -510,14 +562,14 @@ mod tests {
         assert_eq!(mon.update_frozen(1e-3, 1.0, true), Verdict::Continue);
         // Slow contraction with a stale Jacobian: refresh.
         assert_eq!(mon.update_frozen(0.6e-3, 1.0, false), Verdict::Refresh);
-        assert_eq!(mon.update_frozen(0.5e-7, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.5e-6, 1.0, true), Verdict::Continue);
         // Tiny and barely shrinking, but the Jacobian is stale: refresh.
-        assert_eq!(mon.update_frozen(0.2e-7, 1.0, false), Verdict::Refresh);
+        assert_eq!(mon.update_frozen(0.2e-6, 1.0, false), Verdict::Refresh);
         // A fresh Jacobian whose update does not quarter: Newton's own
         // pre-asymptotic phase, a Jacobian per iterate.
         assert_eq!(mon.update_frozen(0.7e-3, 1.0, true), Verdict::Refresh);
-        assert_eq!(mon.update_frozen(0.6e-7, 1.0, true), Verdict::Continue);
-        assert_eq!(mon.update_frozen(0.5e-7, 1.0, true), Verdict::Converged);
+        assert_eq!(mon.update_frozen(0.6e-6, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.5e-6, 1.0, true), Verdict::Converged);
         // Rule 1 holds whatever the Jacobian.
         assert_eq!(mon.update_frozen(1e-17, 1.0, false), Verdict::Converged);
 
@@ -525,9 +577,43 @@ mod tests {
         // a stale non-contracting update is accepted as the floor.
         let mut mon = Monitor::new(NewtonOptions::default());
         assert_eq!(mon.update_frozen(1e-3, 1.0, true), Verdict::Continue);
-        assert_eq!(mon.update_frozen(1e-8, 1.0, true), Verdict::Continue);
-        assert_eq!(mon.update_frozen(1e-14, 1.0, false), Verdict::Continue);
-        assert_eq!(mon.update_frozen(0.9e-14, 1.0, false), Verdict::Converged);
+        assert_eq!(mon.update_frozen(1e-6, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(1e-10, 1.0, false), Verdict::Continue);
+        assert_eq!(mon.update_frozen(0.9e-10, 1.0, false), Verdict::Converged);
+    }
+
+    #[test]
+    fn a_contraction_that_puts_the_next_update_below_the_tolerance_stops() {
+        // Fresh Jacobians: 2.3e-5 then 2.3e-10 (θ = 1e-5). The error left
+        // is about θ² · 2.3e-10 = 2.3e-20, below 4ε: no confirming update.
+        let mut mon = Monitor::new(NewtonOptions::default());
+        assert_eq!(mon.update_frozen(7.3e-3, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(2.3e-5, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(2.3e-10, 1.0, true), Verdict::Converged);
+        // A frozen Jacobian contracting by 1e-5: θ/(1 − θ) · 2e-10 = 2e-15
+        // is above 4ε, one more update; then 2e-20.
+        let mut mon = Monitor::new(NewtonOptions::default());
+        assert_eq!(mon.update_frozen(2e-5, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(2e-10, 1.0, false), Verdict::Continue);
+        assert_eq!(mon.update_frozen(2e-15, 1.0, false), Verdict::Converged);
+        // Not before the updates are tiny, however fast the contraction.
+        let mut mon = Monitor::new(NewtonOptions::default());
+        assert_eq!(mon.update_frozen(1.0, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(1e-5, 1.0, true), Verdict::Continue);
+    }
+
+    #[test]
+    fn after_a_fresh_update_the_frozen_jacobian_is_judged_by_the_square_of_its_ratio() {
+        // A fresh update of 2.3e-5 after 7.3e-3 (θ = 3e-3): a Jacobian kept
+        // from here contracts at about θ² = 1e-5, which reaches 4ε within
+        // 3 updates; judged by θ it would not (2.3e-5 · (3e-3)³ = 6e-13).
+        let mut mon = Monitor::new(NewtonOptions::default()).refresh_beyond(3);
+        assert_eq!(mon.update_frozen(7.3e-3, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(2.3e-5, 1.0, true), Verdict::Continue);
+        // The same ratio from a frozen Jacobian: refresh.
+        let mut mon = Monitor::new(NewtonOptions::default()).refresh_beyond(3);
+        assert_eq!(mon.update_frozen(7.3e-3, 1.0, true), Verdict::Continue);
+        assert_eq!(mon.update_frozen(2.3e-5, 1.0, false), Verdict::Refresh);
     }
 
     #[test]
@@ -544,6 +630,12 @@ mod tests {
         // Judged against the jump: it did not quarter, so a Jacobian here.
         assert_eq!(mon.update_frozen(0.5e-4, 1.0, false), Verdict::Refresh);
         assert_eq!(mon.iterations, 2);
+        // A tiny update after a jump that removed most of the error: its
+        // ratio to the jump (1e-7) is no contraction rate, and rule 3 does
+        // not stop on it.
+        let mut mon = Monitor::new(NewtonOptions::default());
+        mon.jump(1e-3);
+        assert_eq!(mon.update_frozen(1e-10, 1.0, false), Verdict::Continue);
     }
 
     #[test]

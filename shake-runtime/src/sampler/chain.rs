@@ -16,6 +16,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 
 use crate::base_map::StormerVerlet;
+use crate::guard::Options;
 use crate::integrator::Integrator;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
@@ -106,16 +107,27 @@ impl<S: ConstrainedSystem + Clone> Chain<S> {
         let d = system.dof();
         let mut current = State::zeros(d);
         current.q.as_mut_slice().copy_from_slice(q0);
+        // Every solve of a transition to the sampler's Newton options.
+        let solves = |i: Integrator<S, StormerVerlet>| {
+            let options = Options {
+                newton: opts.newton,
+                ..*i.options()
+            };
+            i.with_options(options)
+        };
         Chain {
-            forward: Integrator::new(system.clone(), StormerVerlet, opts.step_size).rattle(),
+            forward: solves(
+                Integrator::new(system.clone(), StormerVerlet, opts.step_size).rattle(),
+            ),
             backward: {
                 // Its starts are the forward steps' results, each already
                 // checked against N at the trajectory's start (which was
                 // judged against N's terms): judging every step back's
                 // start against the terms too would cost m + 1 Hessians a
                 // step for nothing.
-                let mut back =
-                    Integrator::new(system.clone(), StormerVerlet, -opts.step_size).rattle();
+                let mut back = solves(
+                    Integrator::new(system.clone(), StormerVerlet, -opts.step_size).rattle(),
+                );
                 back.guard.judge_terms = false;
                 back
             },

@@ -127,6 +127,7 @@ use rayon::prelude::*;
 
 use crate::base_map::StormerVerlet;
 use crate::integrator::Integrator;
+use crate::newton::NewtonOptions;
 use crate::state::State;
 use crate::system::ConstrainedSystem;
 
@@ -137,6 +138,12 @@ use gram::Gram;
 /// manifold of any sensible scale, and small enough that the adaptation's
 /// μ = log(10 h₀) and the engine's times stay finite.
 const MAX_STEP_SIZE: f64 = 1e6;
+
+/// The largest [`SamplerOptions::newton`] step tolerance: an error of λ
+/// of 1e-9 ‖λ‖ moves the step back's end by about h ‖g_q‖ ‖λ‖ 1e-9, a
+/// tenth of the default `reverse_tolerance` times a step of length
+/// h ‖p‖ where ‖g_q‖ ‖λ‖ is of the order of ‖p‖.
+const MAX_SOLVE_TOLERANCE: f64 = 1e-9;
 
 /// The deepest tree of the dynamic integration time: 2²⁰ − 1 steps a
 /// transition, far past any useful trajectory, and a bound on the work a
@@ -268,6 +275,30 @@ pub struct SamplerOptions {
     /// `f64::INFINITY` turns the check off, and its step back with it:
     /// half the cost, and a biased chain wherever a solve can jump.
     pub reverse_tolerance: f64,
+    /// The Newton iterations of every solve of a transition: each step's
+    /// SHAKE and Π, and the step back's (default
+    /// [`NewtonOptions::default`], to round-off). A larger
+    /// `step_tolerance` stops SHAKE once its update of λ is below that
+    /// fraction of ‖λ‖∞, as mici stops its projections at
+    /// ‖Δq‖∞ < 1e-8 (`examples/sampler.py`): fewer updates per step, and a
+    /// step that is no longer R_h to round-off, only to that tolerance.
+    /// The step back then misses by about h ‖g_q‖ times that error of λ,
+    /// which must stay well below `reverse_tolerance` times the step: a
+    /// `step_tolerance` from 4ε (the default) to 1e-9, `stagnation_threshold`
+    /// in (0, 1) and at least one iteration, else
+    /// [`SamplerError::InvalidOption`].
+    ///
+    /// ```
+    /// use geoshake_runtime::examples::Pendulum;
+    /// use geoshake_runtime::sampler::{sample, SamplerOptions};
+    /// use geoshake_runtime::NewtonOptions;
+    /// let newton = NewtonOptions { step_tolerance: 1e-10, ..NewtonOptions::default() };
+    /// let opts = SamplerOptions { newton, draws: 200, warmup: 100, ..SamplerOptions::default() };
+    /// let circle = Pendulum { gravity: 2.0, length: 1.0 };
+    /// let s = sample(&circle, &[[0.0, -1.0]], &opts).unwrap();
+    /// assert!(s.summary().acceptance() > 0.5);
+    /// ```
+    pub newton: NewtonOptions,
     /// The seed of every chain's generator (default 0).
     pub seed: u64,
     /// The measure e^{−U} is a density with respect to (default
@@ -288,6 +319,7 @@ impl Default for SamplerOptions {
             target_acceptance: Some(0.8),
             target_failure_rate: 0.01,
             reverse_tolerance: 1e-8,
+            newton: NewtonOptions::default(),
             seed: 0,
             density: Density::Hausdorff,
         }
@@ -343,6 +375,26 @@ impl SamplerOptions {
                 self.reverse_tolerance,
                 "positive (infinity turns the check off)",
             );
+        }
+        let newton = &self.newton;
+        if !(newton.step_tolerance >= NewtonOptions::default().step_tolerance
+            && newton.step_tolerance <= MAX_SOLVE_TOLERANCE)
+        {
+            return invalid(
+                "newton.step_tolerance",
+                newton.step_tolerance,
+                "from 4ε (round-off, the default) to 1e-9",
+            );
+        }
+        if !(newton.stagnation_threshold > 0.0 && newton.stagnation_threshold < 1.0) {
+            return invalid(
+                "newton.stagnation_threshold",
+                newton.stagnation_threshold,
+                "strictly between 0 and 1",
+            );
+        }
+        if newton.max_iterations == 0 {
+            return invalid("newton.max_iterations", 0.0, "at least one iteration");
         }
         Ok(())
     }

@@ -27,7 +27,7 @@ fn small(draws: usize) -> SamplerOptions {
 #[test]
 fn bad_options_are_typed_errors() {
     let start = [[1.0, 0.0]];
-    let cases: [(SamplerOptions, &str); 9] = [
+    let cases: [(SamplerOptions, &str); 12] = [
         (
             SamplerOptions {
                 step_size: 0.0,
@@ -91,6 +91,36 @@ fn bad_options_are_typed_errors() {
                 ..small(10)
             },
             "target_acceptance",
+        ),
+        (
+            SamplerOptions {
+                newton: NewtonOptions {
+                    step_tolerance: 1e-6,
+                    ..NewtonOptions::default()
+                },
+                ..small(10)
+            },
+            "newton.step_tolerance",
+        ),
+        (
+            SamplerOptions {
+                newton: NewtonOptions {
+                    step_tolerance: f64::NAN,
+                    ..NewtonOptions::default()
+                },
+                ..small(10)
+            },
+            "newton.step_tolerance",
+        ),
+        (
+            SamplerOptions {
+                newton: NewtonOptions {
+                    max_iterations: 0,
+                    ..NewtonOptions::default()
+                },
+                ..small(10)
+            },
+            "newton.max_iterations",
         ),
     ];
     for (opts, field) in cases {

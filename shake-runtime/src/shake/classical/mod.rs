@@ -30,10 +30,13 @@
 //! with it (`tests/suite/classical_agrees.rs`, the paper's claim 2).
 //! Stagnation at the noise floor with a fresh Jacobian stops it too: the
 //! one rule of simplified Newton ([`Monitor::update_frozen`], with λ's
-//! round-off level as its floor), which the general kernel uses too. It
-//! does not stop on the contraction rate alone (θ/(1−θ)‖Δ_k‖ below the
-//! tolerance, Hairer & Wanner, *Solving ODEs II*, IV.8): that too saves
-//! the confirming update and leaves λ off by its size.
+//! round-off level as its floor), which the general kernel uses too. So
+//! does its rule 3: where the contraction puts the error left in λ below
+//! 4ε‖λ‖ (θ/(1−θ)‖Δ_k‖, or θ²‖Δ_k‖ after a fresh Jacobian; Hairer &
+//! Wanner, *Solving ODEs II*, IV.8), λ is as close as the confirming
+//! update would bring it, and that update is not taken. A residual at
+//! round-off says nothing of the error in λ, which is why it alone is
+//! followed by the confirming update.
 //!
 //! For one constraint of degree ≤ 2 (a distance, as the system declares,
 //! [`ConstrainedSystem::quadratic_constraints`]) r(λ) = r0 + r1 λ + r2 λ²
