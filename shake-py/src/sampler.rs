@@ -62,11 +62,17 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
 /// e^{−U}/√det(g_q g_qᵀ) on M: the sampler adds ½ log det(g_q g_qᵀ) to U
 /// (and to `energy`), as mici's `dens_wrt_hausdorff=False`. Any other value
 /// raises `InvalidInputError`.
+///
+/// `newton_tolerance` stops each step's solves once Newton's update of
+/// the multipliers is below that fraction of them (default None: at
+/// round-off, 4ε), as mici stops its projections at ‖Δq‖∞ < 1e-8: a
+/// value from 4ε to 1e-9, fewer updates per step, each step exact only to
+/// that tolerance (docs/sampler.md).
 #[pyfunction]
 #[pyo3(signature = (system, q0, *, chains=Whole::Fits(4), draws=Whole::Fits(1000),
     warmup=Whole::Fits(1000), steps=Whole::Fits(10), max_tree_depth=None, step_size=0.1,
     target_acceptance=Some(0.8), target_failure_rate=0.01, step_size_jitter=0.2, reverse_tolerance=1e-8,
-    seed=Whole::Fits(0), density="hausdorff"))]
+    seed=Whole::Fits(0), density="hausdorff", newton_tolerance=None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn sample<'py>(
     py: Python<'py>,
@@ -84,6 +90,7 @@ pub(crate) fn sample<'py>(
     reverse_tolerance: f64,
     seed: Whole,
     density: &str,
+    newton_tolerance: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let chains = chains.count("chains", 0)?;
     let draws = draws.count("draws", 0)?;
@@ -119,7 +126,7 @@ pub(crate) fn sample<'py>(
     };
     let (flat, _) = real_array(q0, "q0", if ndim == 2 { 2 } else { 1 }, d, "q, d")?;
     let starts: Vec<&[f64]> = flat.chunks(d.max(1)).collect();
-    let options = SamplerOptions {
+    let mut options = SamplerOptions {
         chains,
         draws,
         warmup,
@@ -134,6 +141,9 @@ pub(crate) fn sample<'py>(
         density,
         ..SamplerOptions::default()
     };
+    if let Some(t) = newton_tolerance {
+        options.newton.step_tolerance = t;
+    }
     // The chains stop at their next look when Ctrl-C arrives.
     let stop = AtomicBool::new(false);
     let (samples, interrupt) = watching(
