@@ -94,6 +94,19 @@ fn read(plan: &FamilyClusters, table: &Table, inv_mass: &[f64], c: usize) -> Rea
     }
 }
 
+/// The coordinates of a batch's triangles in local order, particle i's
+/// at v[3 (i − base)..].
+#[inline(always)]
+fn gather<T: Real>(v: &[f64], base: usize, batch: &[Read]) -> [V3<T>; 3] {
+    let mut out = [[T::splat(0.0); 3]; 3];
+    for (s, o) in out.iter_mut().enumerate() {
+        for (c, o) in o.iter_mut().enumerate() {
+            *o = T::from_fn(|l| v[3 * (batch[l].parts[s] - base) + c]);
+        }
+    }
+    out
+}
+
 /// The position stage (`shake_fixed`'s contract, the stencil a distance)
 /// of T::N triangles of one `shape`, side by side: closed form, and the
 /// Newton kernel, in the clusters' order, for a triangle the closed form
@@ -113,18 +126,8 @@ fn shake_batch<S: Stencil, T: Real>(
     p: &mut [f64],
 ) -> Result<(), ClusterFailure> {
     debug_assert_eq!(batch.len(), T::N);
-    let zero = T::splat(0.0);
-    let (mut x0, mut xt, mut pl) = ([[zero; 3]; 3], [[zero; 3]; 3], [[zero; 3]; 3]);
-    for (l, r) in batch.iter().enumerate() {
-        for s in 0..3 {
-            let (i, j) = (r.parts[s], r.parts[s] - w.base);
-            for c in 0..3 {
-                x0[s][c].set(l, args.q0[3 * i + c]);
-                xt[s][c].set(l, q[3 * j + c]);
-                pl[s][c].set(l, p[3 * j + c]);
-            }
-        }
-    }
+    let (x0, xt) = (gather(args.q0, 0, batch), gather(q, w.base, batch));
+    let mut pl = gather(p, w.base, batch);
     let sol = solve(shape, &x0, &xt);
     let res = residuals(&sol.x1, shape.d2);
     // x̃ already within the tolerance (or the round-off of its
@@ -156,6 +159,31 @@ fn shake_batch<S: Stencil, T: Real>(
             projected = Some(project(&sol.x1, wv, &pl));
         }
     }
+    // The common case first: every lane takes the closed form's answer as
+    // it is, decided by a few comparisons of whole registers (sufficient
+    // conditions for the per-lane judgement below to pass, each lane the
+    // same answer; a NaN fails them and is judged lane by lane).
+    let thr = T::splat(args.tol.max(ROUNDOFF_CAP));
+    let tol = T::splat(args.tol);
+    let mut plain = thr.lt(res_t[0]) | thr.lt(res_t[1]) | thr.lt(res_t[2]);
+    plain = plain & res[0].le(tol) & res[1].le(tol) & res[2].le(tol);
+    plain = plain & sol.valid() & near_branch(&sol.x1, &xt, shape.min_d2);
+    let judged = projected.as_ref().map(Projected::plain);
+    if let Some((ok, _)) = judged {
+        plain = plain & ok;
+    }
+    if shape.ok && T::all(plain) {
+        w.max_rel = w.max_rel.max(worst(&res).max_lane());
+        if let Some((_, worst2)) = judged {
+            w.max_hidden = w.max_hidden.max(worst2.max_lane().sqrt());
+        }
+        let out = projected.as_ref().map_or(&pl, |pr| &pr.p);
+        for (l, r) in batch.iter().enumerate() {
+            write(w, r, l, &sol, with_p.then_some(out), q, p);
+        }
+        return Ok(());
+    }
+    let (valid, near) = (sol.valid(), near_branch(&sol.x1, &xt, shape.min_d2));
     for (l, r) in batch.iter().enumerate() {
         let (worst, _) = worst_of(&res, l);
         let met = worst <= args.tol || at_roundoff(&sol.x1, &res, l, args.tol);
@@ -163,30 +191,11 @@ fn shake_batch<S: Stencil, T: Real>(
         // O(h²), is decided without computing the floors.)
         let needed = worst_of(&res_t, l).0 > args.tol.max(ROUNDOFF_CAP)
             || !at_roundoff(&xt, &res_t, l, args.tol);
-        if !(needed
-            && shape.ok
-            && sol.valid(l)
-            && met
-            && near_branch(&sol.x1, &xt, l, shape.min_d2))
-        {
+        if !(needed && shape.ok && T::holds(valid, l) && met && T::holds(near, l)) {
             shake_fixed::<S, 3, 3, 9>(w, f, r.c, stencil, table, plan, args, fuse, q, p)?;
             continue;
         }
         w.max_rel = w.max_rel.max(worst);
-        for s in 0..3 {
-            let j = r.parts[s] - w.base;
-            for c in 0..3 {
-                q[3 * j + c] = sol.x1[s][c].lane(l);
-            }
-        }
-        if let Some(st) = w.store.as_deref_mut() {
-            for k in 0..3 {
-                st[r.on[k] - w.mbase] = sol.nu[k].lane(l);
-            }
-        }
-        if !with_p {
-            continue;
-        }
         let out = match &projected {
             Some(pr) => match pr.judge(l, &wv, &pl) {
                 Some((h, _)) if h <= HIDDEN_LIMIT => {
@@ -194,16 +203,48 @@ fn shake_batch<S: Stencil, T: Real>(
                     &pr.p
                 }
                 h => {
+                    // (q and ν written first, as they were before the
+                    // judgement.)
+                    write(w, r, l, &sol, None, q, p);
                     return Err(ClusterFailure {
                         member: r.on[h.map_or(0, |h| h.1)],
                         residual: h.map_or(f64::NAN, |h| h.0),
                         iterations: 0,
                         kind: FailureKind::SingularN,
-                    })
+                    });
                 }
             },
             None => &pl,
         };
+        write(w, r, l, &sol, with_p.then_some(out), q, p);
+    }
+    Ok(())
+}
+
+/// Lane l's answer written back: x1 to q, ν to the store, and the momenta
+/// `out` (when the step has them) to p.
+#[inline(always)]
+fn write<T: Real>(
+    w: &mut Work<'_>,
+    r: &Read,
+    l: usize,
+    sol: &Solution<T>,
+    out: Option<&[V3<T>; 3]>,
+    q: &mut [f64],
+    p: &mut [f64],
+) {
+    for s in 0..3 {
+        let j = r.parts[s] - w.base;
+        for c in 0..3 {
+            q[3 * j + c] = sol.x1[s][c].lane(l);
+        }
+    }
+    if let Some(st) = w.store.as_deref_mut() {
+        for k in 0..3 {
+            st[r.on[k] - w.mbase] = sol.nu[k].lane(l);
+        }
+    }
+    if let Some(out) = out {
         for s in 0..3 {
             let j = r.parts[s] - w.base;
             for c in 0..3 {
@@ -211,7 +252,6 @@ fn shake_batch<S: Stencil, T: Real>(
             }
         }
     }
-    Ok(())
 }
 
 /// The loop of [`shake_clusters`] over a family of triangles of distance

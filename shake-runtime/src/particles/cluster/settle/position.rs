@@ -80,7 +80,7 @@ pub(super) struct Shape {
 /// goes to the Newton kernel. Water: 16.
 const MAX_MASS_RATIO: f64 = 1e4;
 
-/// Whether lane l's x1 is within an eighth of the shortest length of the
+/// The lanes whose x1 is within an eighth of the shortest length of the
 /// unconstrained x̃ for every particle. The closed form takes the branch of
 /// the torque equation nearest θ = 0, which at large steps of light,
 /// flat triangles can be another SHAKE root than the one Newton from x̃
@@ -88,20 +88,13 @@ const MAX_MASS_RATIO: f64 = 1e4;
 /// a simulation's step asks for (h²-small), the branch is the one through
 /// the identity. Beyond it the triangle goes to the Newton kernel.
 #[inline(always)]
-pub(super) fn near_branch<T: Real>(
-    x1: &[V3<T>; 3],
-    xt: &[V3<T>; 3],
-    l: usize,
-    min_d2: f64,
-) -> bool {
-    (0..3).all(|a| {
-        let mut r2 = 0.0;
-        for c in 0..3 {
-            let d = x1[a][c].lane(l) - xt[a][c].lane(l);
-            r2 += d * d;
-        }
-        r2 <= min_d2 / 64.0
-    })
+pub(super) fn near_branch<T: Real>(x1: &[V3<T>; 3], xt: &[V3<T>; 3], min_d2: f64) -> T::Mask {
+    let lim = T::splat(min_d2 / 64.0);
+    let near = |a: usize| {
+        let d = sub(x1[a], xt[a]);
+        dot(d, d).le(lim)
+    };
+    near(0) & near(1) & near(2)
 }
 
 impl Shape {
@@ -180,18 +173,20 @@ pub(super) struct Solution<T> {
 }
 
 impl<T: Real> Solution<T> {
-    /// Whether lane l has an answer: every condition holds and x1 and ν
-    /// are finite (NaN fails every comparison).
+    /// The lanes with an answer: every condition holds and x1 and ν are
+    /// finite (NaN fails every comparison).
     #[inline(always)]
-    pub(super) fn valid(&self, l: usize) -> bool {
-        let finite = self.nu.iter().all(|v| v.lane(l).is_finite())
-            && self.x1.iter().flatten().all(|v| v.lane(l).is_finite());
-        self.flat.lane(l) > 0.0
-            && self.nn.lane(l).is_finite()
-            && self.cos_phi2.lane(l) > 0.0
-            && self.cos_psi2.lane(l) > 0.0
-            && self.s2c.lane(l) >= 0.0
-            && finite
+    pub(super) fn valid(&self) -> T::Mask {
+        let zero = T::splat(0.0);
+        let mut ok = zero.lt(self.flat)
+            & self.nn.finite()
+            & zero.lt(self.cos_phi2)
+            & zero.lt(self.cos_psi2)
+            & zero.le(self.s2c);
+        for v in self.nu.iter().chain(self.x1.iter().flatten()) {
+            ok = ok & v.finite();
+        }
+        ok
     }
 }
 
@@ -349,6 +344,13 @@ pub(super) fn worst_of<T: Real>(r: &V3<T>, l: usize) -> (f64, usize) {
         }
     }
     (worst, at)
+}
+
+/// The largest of each lane's [`residuals`], on a lane none of which is
+/// NaN ([`worst_of`]'s, there).
+#[inline(always)]
+pub(super) fn worst<T: Real>(r: &V3<T>) -> T {
+    r[0].max(r[1]).max(r[2])
 }
 
 /// Whether every pair of lane l is within `tol` or the round-off floor of
