@@ -57,10 +57,14 @@ pub(crate) fn all_triangles(plan: &FamilyClusters, arity: usize) -> bool {
 /// For each pair k of a cluster, the member on it (its row in the table).
 #[inline(always)]
 fn pair_members(plan: &FamilyClusters, c: usize) -> [usize; 3] {
+    // (One slice each, checked once, rather than one per member.)
+    let (s, m) = (
+        &plan.slots[6 * c..6 * c + 6],
+        &plan.members[3 * c..3 * c + 3],
+    );
     let mut on = [0usize; 3];
     for j in 0..3 {
-        let s = &plan.slots[(3 * c + j) * 2..(3 * c + j) * 2 + 2];
-        on[(s[0] + s[1] - 1) as usize] = plan.members[3 * c + j] as usize;
+        on[(s[2 * j] + s[2 * j + 1] - 1) as usize] = m[j] as usize;
     }
     on
 }
@@ -127,7 +131,6 @@ fn shake_batch<S: Stencil, T: Real>(
 ) -> Result<(), ClusterFailure> {
     debug_assert_eq!(batch.len(), T::N);
     let (x0, xt) = (gather(args.q0, 0, batch), gather(q, w.base, batch));
-    let mut pl = gather(p, w.base, batch);
     let sol = solve(shape, &x0, &xt);
     let res = residuals(&sol.x1, shape.d2);
     // x̃ already within the tolerance (or the round-off of its
@@ -137,6 +140,8 @@ fn shake_batch<S: Stencil, T: Real>(
     // far from the origin) turn that rounding into an impulse of order
     // m·ulp(x)/h on the momenta.
     let res_t = residuals(&xt, shape.d2);
+    // (The momenta gathered after the solve: not held across it.)
+    let mut pl = gather(p, w.base, batch);
     let with_p = args.inv_h != 0.0;
     let wv = [
         T::splat(shape.w[0]),
