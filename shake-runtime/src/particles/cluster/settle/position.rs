@@ -89,12 +89,15 @@ const MAX_MASS_RATIO: f64 = 1e4;
 /// the identity. Beyond it the triangle goes to the Newton kernel.
 #[inline(always)]
 pub(super) fn near_branch<T: Real>(x1: &[V3<T>; 3], xt: &[V3<T>; 3], min_d2: f64) -> T::Mask {
-    let lim = T::splat(min_d2 / 64.0);
-    let near = |a: usize| {
-        let d = sub(x1[a], xt[a]);
+    // (Functions, not closures: a closure is not inlined into the kernel
+    // compiled for AVX.)
+    #[inline(always)]
+    fn near<T: Real>(x1: V3<T>, xt: V3<T>, lim: T) -> T::Mask {
+        let d = sub(x1, xt);
         dot(d, d).le(lim)
-    };
-    near(0) & near(1) & near(2)
+    }
+    let lim = T::splat(min_d2 / 64.0);
+    near(x1[0], xt[0], lim) & near(x1[1], xt[1], lim) & near(x1[2], xt[2], lim)
 }
 
 impl Shape {
@@ -326,12 +329,17 @@ pub(super) fn solve<T: Real>(shape: &Shape, x0: &[V3<T>; 3], xt: &[V3<T>; 3]) ->
 /// collapsed pair, fails every tolerance.
 #[inline(always)]
 pub(super) fn residuals<T: Real>(x: &[V3<T>; 3], d2: V3) -> V3<T> {
-    let r = |k: usize, i: usize, j: usize| {
-        let e = sub(x[i], x[j]);
+    #[inline(always)]
+    fn r<T: Real>(a: V3<T>, b: V3<T>, d2: f64) -> T {
+        let e = sub(a, b);
         let l2 = dot(e, e);
-        (l2 - T::splat(d2[k])).abs() / (T::splat(2.0) * l2)
-    };
-    [r(0, 0, 1), r(1, 0, 2), r(2, 1, 2)]
+        (l2 - T::splat(d2)).abs() / (T::splat(2.0) * l2)
+    }
+    [
+        r(x[0], x[1], d2[0]),
+        r(x[0], x[2], d2[1]),
+        r(x[1], x[2], d2[2]),
+    ]
 }
 
 /// The worst of lane l's [`residuals`], and its pair.

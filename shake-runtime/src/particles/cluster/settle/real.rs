@@ -267,6 +267,145 @@ impl BitOr for LaneMask {
     }
 }
 
+/// Whether the CPU has AVX, for [`Wide`] (the check is cached).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) fn has_avx() -> bool {
+    std::arch::is_x86_feature_detected!("avx")
+}
+
+/// [`LANES`] numbers in one AVX register, for the kernel compiled for
+/// AVX and entered only where [`has_avx`] holds: half the registers of
+/// [`Lanes`], so fewer of a batch's numbers are spilled. The same IEEE
+/// operations lane by lane, so the same bits (AVX has no fused
+/// multiply-add; that is FMA, never enabled here).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Wide(__m256d);
+
+/// An AVX intrinsic on a [`Wide`].
+#[cfg(target_arch = "x86_64")]
+macro_rules! avx {
+    ($e:expr) => {
+        // SAFETY: a `Wide` is made and used only inside the kernel
+        // compiled for AVX (`triangles_avx`), which runs only where
+        // `has_avx` holds, and in tests that check it first: the CPU has
+        // the instructions (the intrinsics touch no memory here).
+        unsafe { $e }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+macro_rules! widewise {
+    ($tr:ident, $f:ident, $op:ident) => {
+        impl $tr for Wide {
+            type Output = Wide;
+            #[inline(always)]
+            fn $f(self, b: Wide) -> Wide {
+                avx!(Wide($op(self.0, b.0)))
+            }
+        }
+    };
+}
+#[cfg(target_arch = "x86_64")]
+widewise!(Add, add, _mm256_add_pd);
+#[cfg(target_arch = "x86_64")]
+widewise!(Sub, sub, _mm256_sub_pd);
+#[cfg(target_arch = "x86_64")]
+widewise!(Mul, mul, _mm256_mul_pd);
+#[cfg(target_arch = "x86_64")]
+widewise!(Div, div, _mm256_div_pd);
+
+#[cfg(target_arch = "x86_64")]
+impl Neg for Wide {
+    type Output = Wide;
+    /// The sign bit flipped, as the scalar `-x` (NaN included).
+    #[inline(always)]
+    fn neg(self) -> Wide {
+        avx!(Wide(_mm256_xor_pd(self.0, _mm256_set1_pd(-0.0))))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Real for Wide {
+    const N: usize = LANES;
+    #[inline(always)]
+    fn splat(v: f64) -> Self {
+        avx!(Wide(_mm256_set1_pd(v)))
+    }
+    #[inline(always)]
+    fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+        let (a, b, c, d) = (f(0), f(1), f(2), f(3));
+        avx!(Wide(_mm256_set_pd(d, c, b, a)))
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        avx!(Wide(_mm256_sqrt_pd(self.0)))
+    }
+    /// The sign bit cleared, as `f64::abs`.
+    #[inline(always)]
+    fn abs(self) -> Self {
+        avx!(Wide(_mm256_andnot_pd(_mm256_set1_pd(-0.0), self.0)))
+    }
+    #[inline(always)]
+    fn lane(self, l: usize) -> f64 {
+        let half = if l < 2 {
+            avx!(_mm256_castpd256_pd128(self.0))
+        } else {
+            avx!(_mm256_extractf128_pd::<1>(self.0))
+        };
+        if l.is_multiple_of(2) {
+            sse2!(_mm_cvtsd_f64(half))
+        } else {
+            sse2!(_mm_cvtsd_f64(_mm_unpackhi_pd(half, half)))
+        }
+    }
+    type Mask = WideMask;
+    #[inline(always)]
+    fn lt(self, b: Self) -> WideMask {
+        avx!(WideMask(_mm256_cmp_pd::<_CMP_LT_OQ>(self.0, b.0)))
+    }
+    #[inline(always)]
+    fn le(self, b: Self) -> WideMask {
+        avx!(WideMask(_mm256_cmp_pd::<_CMP_LE_OQ>(self.0, b.0)))
+    }
+    #[inline(always)]
+    fn all(m: WideMask) -> bool {
+        avx!(_mm256_movemask_pd(m.0)) == 0b1111
+    }
+    #[inline(always)]
+    fn holds(m: WideMask, l: usize) -> bool {
+        (avx!(_mm256_movemask_pd(m.0)) >> l) & 1 == 1
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        avx!(Wide(_mm256_max_pd(self.0, b.0)))
+    }
+}
+
+/// A lane-wise truth value of [`Wide`]: all bits set where it holds.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
+pub(super) struct WideMask(__m256d);
+
+#[cfg(target_arch = "x86_64")]
+impl BitAnd for WideMask {
+    type Output = WideMask;
+    #[inline(always)]
+    fn bitand(self, b: WideMask) -> WideMask {
+        avx!(WideMask(_mm256_and_pd(self.0, b.0)))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl BitOr for WideMask {
+    type Output = WideMask;
+    #[inline(always)]
+    fn bitor(self, b: WideMask) -> WideMask {
+        avx!(WideMask(_mm256_or_pd(self.0, b.0)))
+    }
+}
+
 /// [`LANES`] numbers, one per triangle of a batch, with lane-wise
 /// arithmetic (written out lane by lane for the vectoriser).
 #[cfg(not(target_arch = "x86_64"))]

@@ -187,6 +187,14 @@ fn the_projection_leaves_every_bond_rigid() {
 /// threads' blocks may cut the batches anywhere.
 #[test]
 fn a_batch_solves_each_triangle_as_alone() {
+    batch_as_alone::<Lanes>();
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        batch_as_alone::<Wide>();
+    }
+}
+
+fn batch_as_alone<L: Real>() {
     let mut rng = Rng(5);
     let (w, d) = ([1.0 / 15.9994, 1.0 / 1.008, 1.0 / 1.008], [1.0, 1.0, 1.633]);
     let shape = Shape::new(w, d.map(|d| d * d));
@@ -197,17 +205,17 @@ fn a_batch_solves_each_triangle_as_alone() {
         .map(|_| [rng.v3(1.0), rng.v3(1.0), rng.v3(1.0)])
         .collect();
     let gather = |v: &dyn Fn(usize) -> [V3; 3]| {
-        [0, 1, 2].map(|s| [0, 1, 2].map(|c| Lanes::from_fn(|l| v(l)[s][c])))
+        [0, 1, 2].map(|s| [0, 1, 2].map(|c| L::from_fn(|l| v(l)[s][c])))
     };
     let x0 = gather(&|l| ts[l].x0);
     let xt = gather(&|l| ts[l].xt);
     let p = gather(&|l| ps[l]);
     let many = solve(&shape, &x0, &xt);
-    let wl = w.map(Lanes::splat);
+    let wl = w.map(L::splat);
     let many_p = project(&many.x1, wl, &p);
     for (l, t) in ts.iter().enumerate() {
         let one = solve(&shape, &t.x0, &t.xt);
-        assert!(one.valid() && Lanes::holds(many.valid(), l));
+        assert!(one.valid() && L::holds(many.valid(), l));
         let one_p = project(&one.x1, w, &ps[l]);
         for s in 0..3 {
             assert_eq!(one.nu[s].to_bits(), many.nu[s].lane(l).to_bits());
@@ -241,11 +249,19 @@ fn triangles_are_the_three_pairs_of_three_particles() {
     assert!(!all_triangles(&p, 2));
 }
 
-/// [`Lanes`]' comparisons, finiteness, |x|, −x and max are f64's on every
+/// [`Lanes`]' and [`Wide`]'s comparisons, finiteness, |x|, −x and max are f64's on every
 /// lane, NaN, infinities and signed zeros included: the batch's decisions
 /// are the lane's own.
 #[test]
 fn lanes_compare_as_f64() {
+    compare_as_f64::<Lanes>();
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        compare_as_f64::<Wide>();
+    }
+}
+
+fn compare_as_f64<L: Real>() {
     let v = [
         0.0,
         -0.0,
@@ -261,16 +277,16 @@ fn lanes_compare_as_f64() {
     for i in 0..n {
         for j in 0..n {
             let (x, y) = (|l: usize| v[(i + l) % n], |l: usize| v[(j + 3 * l) % n]);
-            let (a, b) = (Lanes::from_fn(x), Lanes::from_fn(y));
+            let (a, b) = (L::from_fn(x), L::from_fn(y));
             let (lt, le, fin) = (a.lt(b), a.le(b), a.finite());
             let mut all = true;
             for l in 0..LANES {
                 let (x, y) = (x(l), y(l));
-                assert_eq!(Lanes::holds(lt, l), x < y);
-                assert_eq!(Lanes::holds(le, l), x <= y);
-                assert_eq!(Lanes::holds(lt | le, l), x <= y);
-                assert_eq!(Lanes::holds(lt & le, l), x < y);
-                assert_eq!(Lanes::holds(fin, l), x.is_finite());
+                assert_eq!(L::holds(lt, l), x < y);
+                assert_eq!(L::holds(le, l), x <= y);
+                assert_eq!(L::holds(lt | le, l), x <= y);
+                assert_eq!(L::holds(lt & le, l), x < y);
+                assert_eq!(L::holds(fin, l), x.is_finite());
                 assert_eq!(a.lane(l).to_bits(), x.to_bits());
                 assert_eq!(a.abs().lane(l).to_bits(), x.abs().to_bits());
                 assert_eq!((-a).lane(l).to_bits(), (-x).to_bits());
@@ -279,7 +295,7 @@ fn lanes_compare_as_f64() {
                 }
                 all &= x <= y;
             }
-            assert_eq!(Lanes::all(le), all);
+            assert_eq!(L::all(le), all);
         }
     }
 }
