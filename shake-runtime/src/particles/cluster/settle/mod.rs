@@ -57,10 +57,14 @@ pub(crate) fn all_triangles(plan: &FamilyClusters, arity: usize) -> bool {
 /// For each pair k of a cluster, the member on it (its row in the table).
 #[inline(always)]
 fn pair_members(plan: &FamilyClusters, c: usize) -> [usize; 3] {
+    // (One slice each, checked once, rather than one per member.)
+    let (s, m) = (
+        &plan.slots[6 * c..6 * c + 6],
+        &plan.members[3 * c..3 * c + 3],
+    );
     let mut on = [0usize; 3];
     for j in 0..3 {
-        let s = &plan.slots[(3 * c + j) * 2..(3 * c + j) * 2 + 2];
-        on[(s[0] + s[1] - 1) as usize] = plan.members[3 * c + j] as usize;
+        on[(s[2 * j] + s[2 * j + 1] - 1) as usize] = m[j] as usize;
     }
     on
 }
@@ -94,6 +98,19 @@ fn read(plan: &FamilyClusters, table: &Table, inv_mass: &[f64], c: usize) -> Rea
     }
 }
 
+/// The coordinates of a batch's triangles in local order, particle i's
+/// at v[3 (i − base)..].
+#[inline(always)]
+fn gather<T: Real>(v: &[f64], base: usize, batch: &[Read]) -> [V3<T>; 3] {
+    let mut out = [[T::splat(0.0); 3]; 3];
+    for (s, o) in out.iter_mut().enumerate() {
+        for (c, o) in o.iter_mut().enumerate() {
+            *o = T::from_fn(|l| v[3 * (batch[l].parts[s] - base) + c]);
+        }
+    }
+    out
+}
+
 /// The position stage (`shake_fixed`'s contract, the stencil a distance)
 /// of T::N triangles of one `shape`, side by side: closed form, and the
 /// Newton kernel, in the clusters' order, for a triangle the closed form
@@ -113,18 +130,7 @@ fn shake_batch<S: Stencil, T: Real>(
     p: &mut [f64],
 ) -> Result<(), ClusterFailure> {
     debug_assert_eq!(batch.len(), T::N);
-    let zero = T::splat(0.0);
-    let (mut x0, mut xt, mut pl) = ([[zero; 3]; 3], [[zero; 3]; 3], [[zero; 3]; 3]);
-    for (l, r) in batch.iter().enumerate() {
-        for s in 0..3 {
-            let (i, j) = (r.parts[s], r.parts[s] - w.base);
-            for c in 0..3 {
-                x0[s][c].set(l, args.q0[3 * i + c]);
-                xt[s][c].set(l, q[3 * j + c]);
-                pl[s][c].set(l, p[3 * j + c]);
-            }
-        }
-    }
+    let (x0, xt) = (gather(args.q0, 0, batch), gather(q, w.base, batch));
     let sol = solve(shape, &x0, &xt);
     let res = residuals(&sol.x1, shape.d2);
     // x̃ already within the tolerance (or the round-off of its
@@ -134,6 +140,8 @@ fn shake_batch<S: Stencil, T: Real>(
     // far from the origin) turn that rounding into an impulse of order
     // m·ulp(x)/h on the momenta.
     let res_t = residuals(&xt, shape.d2);
+    // (The momenta gathered after the solve: not held across it.)
+    let mut pl = gather(p, w.base, batch);
     let with_p = args.inv_h != 0.0;
     let wv = [
         T::splat(shape.w[0]),
@@ -156,6 +164,31 @@ fn shake_batch<S: Stencil, T: Real>(
             projected = Some(project(&sol.x1, wv, &pl));
         }
     }
+    // The common case first: every lane takes the closed form's answer as
+    // it is, decided by a few comparisons of whole registers (sufficient
+    // conditions for the per-lane judgement below to pass, each lane the
+    // same answer; a NaN fails them and is judged lane by lane).
+    let thr = T::splat(args.tol.max(ROUNDOFF_CAP));
+    let tol = T::splat(args.tol);
+    let mut plain = thr.lt(res_t[0]) | thr.lt(res_t[1]) | thr.lt(res_t[2]);
+    plain = plain & res[0].le(tol) & res[1].le(tol) & res[2].le(tol);
+    plain = plain & sol.valid() & near_branch(&sol.x1, &xt, shape.min_d2);
+    let judged = projected.as_ref().map(Projected::plain);
+    if let Some((ok, _)) = judged {
+        plain = plain & ok;
+    }
+    if shape.ok && T::all(plain) {
+        w.max_rel = w.max_rel.max(worst(&res).max_lane());
+        if let Some((_, worst2)) = judged {
+            w.max_hidden = w.max_hidden.max(worst2.max_lane().sqrt());
+        }
+        let out = projected.as_ref().map_or(&pl, |pr| &pr.p);
+        for (l, r) in batch.iter().enumerate() {
+            write(w, r, l, &sol, with_p.then_some(out), q, p);
+        }
+        return Ok(());
+    }
+    let (valid, near) = (sol.valid(), near_branch(&sol.x1, &xt, shape.min_d2));
     for (l, r) in batch.iter().enumerate() {
         let (worst, _) = worst_of(&res, l);
         let met = worst <= args.tol || at_roundoff(&sol.x1, &res, l, args.tol);
@@ -163,30 +196,11 @@ fn shake_batch<S: Stencil, T: Real>(
         // O(h²), is decided without computing the floors.)
         let needed = worst_of(&res_t, l).0 > args.tol.max(ROUNDOFF_CAP)
             || !at_roundoff(&xt, &res_t, l, args.tol);
-        if !(needed
-            && shape.ok
-            && sol.valid(l)
-            && met
-            && near_branch(&sol.x1, &xt, l, shape.min_d2))
-        {
+        if !(needed && shape.ok && T::holds(valid, l) && met && T::holds(near, l)) {
             shake_fixed::<S, 3, 3, 9>(w, f, r.c, stencil, table, plan, args, fuse, q, p)?;
             continue;
         }
         w.max_rel = w.max_rel.max(worst);
-        for s in 0..3 {
-            let j = r.parts[s] - w.base;
-            for c in 0..3 {
-                q[3 * j + c] = sol.x1[s][c].lane(l);
-            }
-        }
-        if let Some(st) = w.store.as_deref_mut() {
-            for k in 0..3 {
-                st[r.on[k] - w.mbase] = sol.nu[k].lane(l);
-            }
-        }
-        if !with_p {
-            continue;
-        }
         let out = match &projected {
             Some(pr) => match pr.judge(l, &wv, &pl) {
                 Some((h, _)) if h <= HIDDEN_LIMIT => {
@@ -194,16 +208,48 @@ fn shake_batch<S: Stencil, T: Real>(
                     &pr.p
                 }
                 h => {
+                    // (q and ν written first, as they were before the
+                    // judgement.)
+                    write(w, r, l, &sol, None, q, p);
                     return Err(ClusterFailure {
                         member: r.on[h.map_or(0, |h| h.1)],
                         residual: h.map_or(f64::NAN, |h| h.0),
                         iterations: 0,
                         kind: FailureKind::SingularN,
-                    })
+                    });
                 }
             },
             None => &pl,
         };
+        write(w, r, l, &sol, with_p.then_some(out), q, p);
+    }
+    Ok(())
+}
+
+/// Lane l's answer written back: x1 to q, ν to the store, and the momenta
+/// `out` (when the step has them) to p.
+#[inline(always)]
+fn write<T: Real>(
+    w: &mut Work<'_>,
+    r: &Read,
+    l: usize,
+    sol: &Solution<T>,
+    out: Option<&[V3<T>; 3]>,
+    q: &mut [f64],
+    p: &mut [f64],
+) {
+    for s in 0..3 {
+        let j = r.parts[s] - w.base;
+        for c in 0..3 {
+            q[3 * j + c] = sol.x1[s][c].lane(l);
+        }
+    }
+    if let Some(st) = w.store.as_deref_mut() {
+        for k in 0..3 {
+            st[r.on[k] - w.mbase] = sol.nu[k].lane(l);
+        }
+    }
+    if let Some(out) = out {
         for s in 0..3 {
             let j = r.parts[s] - w.base;
             for c in 0..3 {
@@ -211,13 +257,14 @@ fn shake_batch<S: Stencil, T: Real>(
             }
         }
     }
-    Ok(())
 }
 
 /// The loop of [`shake_clusters`] over a family of triangles of distance
 /// constraints in R³ ([`FamilyClusters::settle`]): [`LANES`] consecutive
 /// triangles of one shape at a time, one at a time where the shape
-/// changes or the block ends.
+/// changes or the block ends. On a CPU with AVX the batches are one AVX
+/// register per number ([`Wide`]), else two SSE2 ones ([`Lanes`]): the
+/// same operations, the same bits, fewer registers spilled.
 #[inline(never)]
 pub(super) fn shake_triangles<S: Stencil>(
     w: &mut Work<'_>,
@@ -230,7 +277,45 @@ pub(super) fn shake_triangles<S: Stencil>(
     q: &mut [f64],
     p: &mut [f64],
 ) -> Result<(), ClusterFailure> {
-    debug_assert!(S::DIM == 3 && S::ARITY == 2);
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        // SAFETY: the CPU has AVX, the one feature `triangles_avx` enables.
+        return unsafe { triangles_avx(w, stencil, table, plan, args, fuse, clusters, q, p) };
+    }
+    triangles::<S, Lanes>(w, stencil, table, plan, args, fuse, clusters, q, p)
+}
+
+/// [`triangles`] over [`Wide`], compiled for AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn triangles_avx<S: Stencil>(
+    w: &mut Work<'_>,
+    stencil: &S,
+    table: &Table,
+    plan: &FamilyClusters,
+    args: &ClusterArgs<'_>,
+    fuse: bool,
+    clusters: std::ops::Range<usize>,
+    q: &mut [f64],
+    p: &mut [f64],
+) -> Result<(), ClusterFailure> {
+    triangles::<S, Wide>(w, stencil, table, plan, args, fuse, clusters, q, p)
+}
+
+/// [`shake_triangles`]' loop, its batches of [`LANES`] triangles over `L`.
+#[inline(always)]
+fn triangles<S: Stencil, L: Real>(
+    w: &mut Work<'_>,
+    stencil: &S,
+    table: &Table,
+    plan: &FamilyClusters,
+    args: &ClusterArgs<'_>,
+    fuse: bool,
+    clusters: std::ops::Range<usize>,
+    q: &mut [f64],
+    p: &mut [f64],
+) -> Result<(), ClusterFailure> {
+    debug_assert!(S::DIM == 3 && S::ARITY == 2 && L::N == LANES);
     let mut f = Fixed {
         sl: [[usize::MAX; FX]; 3],
         wg0d: [[0.0; 9]; 3],
@@ -255,7 +340,7 @@ pub(super) fn shake_triangles<S: Stencil>(
             }
             if same {
                 let (st, tb) = (stencil, table);
-                shake_batch::<S, Lanes>(w, &mut f, sh, &batch, st, tb, plan, args, fuse, q, p)?;
+                shake_batch::<S, L>(w, &mut f, sh, &batch, st, tb, plan, args, fuse, q, p)?;
                 c += LANES;
                 continue;
             }

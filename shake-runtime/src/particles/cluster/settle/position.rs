@@ -80,7 +80,7 @@ pub(super) struct Shape {
 /// goes to the Newton kernel. Water: 16.
 const MAX_MASS_RATIO: f64 = 1e4;
 
-/// Whether lane l's x1 is within an eighth of the shortest length of the
+/// The lanes whose x1 is within an eighth of the shortest length of the
 /// unconstrained x̃ for every particle. The closed form takes the branch of
 /// the torque equation nearest θ = 0, which at large steps of light,
 /// flat triangles can be another SHAKE root than the one Newton from x̃
@@ -88,20 +88,16 @@ const MAX_MASS_RATIO: f64 = 1e4;
 /// a simulation's step asks for (h²-small), the branch is the one through
 /// the identity. Beyond it the triangle goes to the Newton kernel.
 #[inline(always)]
-pub(super) fn near_branch<T: Real>(
-    x1: &[V3<T>; 3],
-    xt: &[V3<T>; 3],
-    l: usize,
-    min_d2: f64,
-) -> bool {
-    (0..3).all(|a| {
-        let mut r2 = 0.0;
-        for c in 0..3 {
-            let d = x1[a][c].lane(l) - xt[a][c].lane(l);
-            r2 += d * d;
-        }
-        r2 <= min_d2 / 64.0
-    })
+pub(super) fn near_branch<T: Real>(x1: &[V3<T>; 3], xt: &[V3<T>; 3], min_d2: f64) -> T::Mask {
+    // (Functions, not closures: a closure is not inlined into the kernel
+    // compiled for AVX.)
+    #[inline(always)]
+    fn near<T: Real>(x1: V3<T>, xt: V3<T>, lim: T) -> T::Mask {
+        let d = sub(x1, xt);
+        dot(d, d).le(lim)
+    }
+    let lim = T::splat(min_d2 / 64.0);
+    near(x1[0], xt[0], lim) & near(x1[1], xt[1], lim) & near(x1[2], xt[2], lim)
 }
 
 impl Shape {
@@ -180,18 +176,20 @@ pub(super) struct Solution<T> {
 }
 
 impl<T: Real> Solution<T> {
-    /// Whether lane l has an answer: every condition holds and x1 and ν
-    /// are finite (NaN fails every comparison).
+    /// The lanes with an answer: every condition holds and x1 and ν are
+    /// finite (NaN fails every comparison).
     #[inline(always)]
-    pub(super) fn valid(&self, l: usize) -> bool {
-        let finite = self.nu.iter().all(|v| v.lane(l).is_finite())
-            && self.x1.iter().flatten().all(|v| v.lane(l).is_finite());
-        self.flat.lane(l) > 0.0
-            && self.nn.lane(l).is_finite()
-            && self.cos_phi2.lane(l) > 0.0
-            && self.cos_psi2.lane(l) > 0.0
-            && self.s2c.lane(l) >= 0.0
-            && finite
+    pub(super) fn valid(&self) -> T::Mask {
+        let zero = T::splat(0.0);
+        let mut ok = zero.lt(self.flat)
+            & self.nn.finite()
+            & zero.lt(self.cos_phi2)
+            & zero.lt(self.cos_psi2)
+            & zero.le(self.s2c);
+        for v in self.nu.iter().chain(self.x1.iter().flatten()) {
+            ok = ok & v.finite();
+        }
+        ok
     }
 }
 
@@ -331,12 +329,17 @@ pub(super) fn solve<T: Real>(shape: &Shape, x0: &[V3<T>; 3], xt: &[V3<T>; 3]) ->
 /// collapsed pair, fails every tolerance.
 #[inline(always)]
 pub(super) fn residuals<T: Real>(x: &[V3<T>; 3], d2: V3) -> V3<T> {
-    let r = |k: usize, i: usize, j: usize| {
-        let e = sub(x[i], x[j]);
+    #[inline(always)]
+    fn r<T: Real>(a: V3<T>, b: V3<T>, d2: f64) -> T {
+        let e = sub(a, b);
         let l2 = dot(e, e);
-        (l2 - T::splat(d2[k])).abs() / (T::splat(2.0) * l2)
-    };
-    [r(0, 0, 1), r(1, 0, 2), r(2, 1, 2)]
+        (l2 - T::splat(d2)).abs() / (T::splat(2.0) * l2)
+    }
+    [
+        r(x[0], x[1], d2[0]),
+        r(x[0], x[2], d2[1]),
+        r(x[1], x[2], d2[2]),
+    ]
 }
 
 /// The worst of lane l's [`residuals`], and its pair.
@@ -349,6 +352,13 @@ pub(super) fn worst_of<T: Real>(r: &V3<T>, l: usize) -> (f64, usize) {
         }
     }
     (worst, at)
+}
+
+/// The largest of each lane's [`residuals`], on a lane none of which is
+/// NaN ([`worst_of`]'s, there).
+#[inline(always)]
+pub(super) fn worst<T: Real>(r: &V3<T>) -> T {
+    r[0].max(r[1]).max(r[2])
 }
 
 /// Whether every pair of lane l is within `tol` or the round-off floor of

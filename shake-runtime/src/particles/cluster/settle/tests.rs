@@ -38,7 +38,7 @@ impl Triangle {
     fn solve(&self) -> Option<Solved> {
         let shape = Shape::new(self.w, self.d2);
         let s = solve(&shape, &self.x0, &self.xt);
-        (shape.ok && s.valid(0)).then_some(Solved { x1: s.x1, nu: s.nu })
+        (shape.ok && s.valid()).then_some(Solved { x1: s.x1, nu: s.nu })
     }
 }
 
@@ -187,32 +187,35 @@ fn the_projection_leaves_every_bond_rigid() {
 /// threads' blocks may cut the batches anywhere.
 #[test]
 fn a_batch_solves_each_triangle_as_alone() {
+    batch_as_alone::<Lanes>();
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        batch_as_alone::<Wide>();
+    }
+}
+
+fn batch_as_alone<L: Real>() {
     let mut rng = Rng(5);
     let (w, d) = ([1.0 / 15.9994, 1.0 / 1.008, 1.0 / 1.008], [1.0, 1.0, 1.633]);
     let shape = Shape::new(w, d.map(|d| d * d));
     let ts: Vec<Triangle> = (0..LANES)
         .map(|_| triangle(&mut rng, w, d, [3.0, 1.0, 2.0], 0.05))
         .collect();
-    let z = Lanes::splat(0.0);
-    let (mut x0, mut xt, mut p) = ([[z; 3]; 3], [[z; 3]; 3], [[z; 3]; 3]);
     let ps: Vec<[V3; 3]> = (0..LANES)
         .map(|_| [rng.v3(1.0), rng.v3(1.0), rng.v3(1.0)])
         .collect();
-    for (l, t) in ts.iter().enumerate() {
-        for s in 0..3 {
-            for c in 0..3 {
-                x0[s][c].set(l, t.x0[s][c]);
-                xt[s][c].set(l, t.xt[s][c]);
-                p[s][c].set(l, ps[l][s][c]);
-            }
-        }
-    }
+    let gather = |v: &dyn Fn(usize) -> [V3; 3]| {
+        [0, 1, 2].map(|s| [0, 1, 2].map(|c| L::from_fn(|l| v(l)[s][c])))
+    };
+    let x0 = gather(&|l| ts[l].x0);
+    let xt = gather(&|l| ts[l].xt);
+    let p = gather(&|l| ps[l]);
     let many = solve(&shape, &x0, &xt);
-    let wl = w.map(Lanes::splat);
+    let wl = w.map(L::splat);
     let many_p = project(&many.x1, wl, &p);
     for (l, t) in ts.iter().enumerate() {
         let one = solve(&shape, &t.x0, &t.xt);
-        assert!(one.valid(0) && many.valid(l));
+        assert!(one.valid() && L::holds(many.valid(), l));
         let one_p = project(&one.x1, w, &ps[l]);
         for s in 0..3 {
             assert_eq!(one.nu[s].to_bits(), many.nu[s].lane(l).to_bits());
@@ -244,4 +247,55 @@ fn triangles_are_the_three_pairs_of_three_particles() {
     let mut p = plan(vec![0, 1, 0, 2, 1, 2]);
     p.fixed = Some((2, 3));
     assert!(!all_triangles(&p, 2));
+}
+
+/// [`Lanes`]' and [`Wide`]'s comparisons, finiteness, |x|, −x and max are f64's on every
+/// lane, NaN, infinities and signed zeros included: the batch's decisions
+/// are the lane's own.
+#[test]
+fn lanes_compare_as_f64() {
+    compare_as_f64::<Lanes>();
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        compare_as_f64::<Wide>();
+    }
+}
+
+fn compare_as_f64<L: Real>() {
+    let v = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        1e-300,
+        f64::MAX,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+    ];
+    let n = v.len();
+    for i in 0..n {
+        for j in 0..n {
+            let (x, y) = (|l: usize| v[(i + l) % n], |l: usize| v[(j + 3 * l) % n]);
+            let (a, b) = (L::from_fn(x), L::from_fn(y));
+            let (lt, le, fin) = (a.lt(b), a.le(b), a.finite());
+            let mut all = true;
+            for l in 0..LANES {
+                let (x, y) = (x(l), y(l));
+                assert_eq!(L::holds(lt, l), x < y);
+                assert_eq!(L::holds(le, l), x <= y);
+                assert_eq!(L::holds(lt | le, l), x <= y);
+                assert_eq!(L::holds(lt & le, l), x < y);
+                assert_eq!(L::holds(fin, l), x.is_finite());
+                assert_eq!(a.lane(l).to_bits(), x.to_bits());
+                assert_eq!(a.abs().lane(l).to_bits(), x.abs().to_bits());
+                assert_eq!((-a).lane(l).to_bits(), (-x).to_bits());
+                if !x.is_nan() && !y.is_nan() {
+                    assert_eq!(a.max(b).lane(l), x.max(y));
+                }
+                all &= x <= y;
+            }
+            assert_eq!(L::all(le), all);
+        }
+    }
 }

@@ -114,6 +114,26 @@ impl<T: Real> Projected<T> {
         Some((worst2.sqrt(), at))
     }
 
+    /// The lanes that [`judge`](Self::judge) passes on the simple ratio
+    /// alone (N positive definite, every pair's d² / (aa bb) in range and
+    /// within `HIDDEN_LIMIT`²), and on them the largest squared ratio:
+    /// judge's worst, squared.
+    #[inline(always)]
+    pub(super) fn plain(&self) -> (T::Mask, T) {
+        let zero = T::splat(0.0);
+        let (tiny, lim2) = (T::splat(1e-200), T::splat(HIDDEN_LIMIT * HIDDEN_LIMIT));
+        let mut ok = zero.lt(self.det) & self.det.finite();
+        let mut worst2 = zero;
+        for k in 0..3 {
+            let (d, aa, bb) = (self.dots[k], self.aa[k], self.bb[k]);
+            let ab = aa * bb;
+            let rel2 = d * d / ab;
+            ok = ok & tiny.lt(aa) & tiny.lt(bb) & ab.lt(T::splat(f64::INFINITY)) & rel2.le(lim2);
+            worst2 = worst2.max(rel2);
+        }
+        (ok, worst2)
+    }
+
     /// Lane l's hidden residual of pair k judged in full
     /// (`relative_dot_after`: its scaled form outside the range of safe
     /// squares, and the velocity before the projection as the scale when
