@@ -93,7 +93,7 @@ create_exception!(
 
 /// A constrained Hamiltonian system: declared from a string
 /// (`geoshake.declare`) or compiled (`geoshake.models`).
-#[pyclass(frozen, module = "shake")]
+#[pyclass(frozen, module = "geoshake")]
 struct System {
     model: Model,
     name: String,
@@ -341,7 +341,7 @@ fn model_names() -> Vec<(String, Vec<String>)> {
 }
 
 /// What a run returns: NumPy arrays.
-#[pyclass(frozen, module = "shake", name = "Result")]
+#[pyclass(frozen, module = "geoshake", name = "Result")]
 struct Result_ {
     /// The stored states, shape (n, 2d): q then p.
     #[pyo3(get)]

@@ -26,6 +26,19 @@ fn error(py: Python<'_>, e: &SamplerError) -> PyErr {
             let _ = err.value(py).setattr("args", (e.to_string(),));
             err
         }
+        // The one option whose Python name is not the Rust field's.
+        SamplerError::InvalidOption {
+            what: "newton.step_tolerance",
+            value,
+            why,
+        } => InvalidInputError::new_err(
+            SamplerError::InvalidOption {
+                what: "newton_tolerance",
+                value: *value,
+                why,
+            }
+            .to_string(),
+        ),
         _ => InvalidInputError::new_err(e.to_string()),
     }
 }

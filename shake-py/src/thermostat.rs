@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 
 use crate::bonds::error;
 use crate::forces::type_name;
+use crate::whole::Whole;
 use crate::InvalidInputError;
 
 /// The increment between members' seeds: SplitMix64's, the odd integer
@@ -47,18 +48,6 @@ fn real(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
     })
 }
 
-/// `obj` as a whole number in [0, 2⁶⁴) (`range`, for the message: the
-/// caller's own bounds), or `InvalidInputError`.
-fn whole(obj: &Bound<'_, PyAny>, name: &str, range: &str) -> PyResult<u64> {
-    obj.extract::<u64>().map_err(|_| {
-        InvalidInputError::new_err(format!(
-            "{name} must be a whole number in {range}, not {}",
-            obj.repr()
-                .map_or_else(|_| type_name(obj), |r| r.to_string())
-        ))
-    })
-}
-
 #[pymethods]
 impl Langevin {
     #[new]
@@ -74,12 +63,14 @@ impl Langevin {
         let gamma = real(friction, "friction")?;
         let kt = real(kT, "kT")?;
         let seed = match seed {
-            Some(s) => whole(s, "seed", "[0, 2⁶⁴)")?,
+            Some(s) => Whole::read(s, "seed", 0, u64::MAX)?,
             None => 0,
         };
         let substeps = match substeps {
             // (Beyond usize, the runtime's own refusal of a K too large.)
-            Some(k) => usize::try_from(whole(k, "substeps", "1..=2²⁰")?).unwrap_or(usize::MAX),
+            Some(k) => {
+                usize::try_from(Whole::read(k, "substeps", 0, u64::MAX)?).unwrap_or(usize::MAX)
+            }
             None => 1,
         };
         let inner = Thermostat::new(gamma, kt, seed)
@@ -118,7 +109,7 @@ impl Langevin {
     /// `member(0)` is this thermostat; member i of `ParticleRattle.ensemble`
     /// runs the steps of `run` on a system given `member(i)`.
     fn member(&self, i: &Bound<'_, PyAny>) -> PyResult<Langevin> {
-        let i = whole(i, "the member", "[0, 2⁶⁴)")?;
+        let i = Whole::read(i, "i", 0, u64::MAX)?;
         Ok(self.for_member(i))
     }
 

@@ -1,16 +1,22 @@
-//! Counts given from Python (steps, strides, chains, iteration budgets):
-//! read as Python ints and checked against their range, so that −1 or
-//! 2**70 is the package's error naming the argument, not the
+//! Counts given from Python (steps, strides, chains, iteration budgets,
+//! seeds): read as Python integers and checked against their range, so
+//! that −1 or 2**70 is the package's error naming the argument, not the
 //! `OverflowError` of a conversion to an unsigned Rust integer.
+//!
+//! An integer is what Python's `operator.index` takes: an `int`, or any
+//! object with `__index__` (NumPy's `int64`, `uint32`, …, which a count
+//! computed with NumPy is). A `bool` and a `float` are refused with a
+//! `TypeError`, as `range(2.0)` is.
 
 use pyo3::exceptions::PyTypeError;
+use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyInt};
+use pyo3::types::{PyBool, PyFloat, PyInt};
 
 use crate::InvalidInputError;
 
-/// A Python int argument as it came: one that fits in a u64, or the text
-/// of one that does not. A float or a bool is refused as a TypeError.
+/// A Python integer argument as it came: one that fits in a u64, or the
+/// text of one that does not. A float or a bool is refused as a TypeError.
 pub(crate) enum Whole {
     Fits(u64),
     Outside(String),
@@ -20,15 +26,28 @@ impl<'py> FromPyObject<'_, 'py> for Whole {
     type Error = PyErr;
 
     fn extract(obj: Borrowed<'_, 'py, PyAny>) -> PyResult<Self> {
-        if obj.is_instance_of::<PyBool>() || !obj.is_instance_of::<PyInt>() {
-            return Err(PyTypeError::new_err(format!(
+        let refused = || -> PyResult<PyErr> {
+            Ok(PyTypeError::new_err(format!(
                 "an integer is required, not {}",
                 obj.get_type().name()?
-            )));
+            )))
+        };
+        if obj.is_instance_of::<PyBool>() || obj.is_instance_of::<PyFloat>() {
+            return Err(refused()?);
         }
-        Ok(match obj.extract::<u64>() {
+        // `operator.index(obj)`: the int itself, or what `__index__` gives
+        // (NumPy's integers); an object without it is not an integer.
+        let int = if obj.is_instance_of::<PyInt>() {
+            obj.to_owned()
+        } else {
+            match obj.call_method0(intern!(obj.py(), "__index__")) {
+                Ok(i) if i.is_instance_of::<PyInt>() => i,
+                _ => return Err(refused()?),
+            }
+        };
+        Ok(match int.extract::<u64>() {
             Ok(v) => Whole::Fits(v),
-            Err(_) => Whole::Outside(obj.str()?.to_string()),
+            Err(_) => Whole::Outside(int.str()?.to_string()),
         })
     }
 }
@@ -45,6 +64,20 @@ impl Whole {
         Err(InvalidInputError::new_err(format!(
             "invalid `{what}` = {text}: an integer from {lo} to {hi}"
         )))
+    }
+
+    /// `obj` read as a [`Whole`] within [lo, hi], with a wrong type also
+    /// the package's `InvalidInputError` naming `what` (for the values
+    /// whose documentation promises that error for anything invalid, as
+    /// `Langevin`'s).
+    pub(crate) fn read(obj: &Bound<'_, PyAny>, what: &str, lo: u64, hi: u64) -> PyResult<u64> {
+        match obj.extract::<Whole>() {
+            Ok(w) => w.within(what, lo, hi),
+            Err(e) => Err(InvalidInputError::new_err(format!(
+                "invalid `{what}`: {}",
+                e.value(obj.py())
+            ))),
+        }
     }
 
     /// [`Whole::within`] as a `usize`.

@@ -337,6 +337,8 @@ def test_steps_go_on_from_the_state_they_made(free_dimers):
         ((1.0, 1.0), {"seed": -1}, "seed"),
         ((1.0, 1.0), {"seed": 2**64}, "seed"),
         ((1.0, 1.0), {"seed": 1.5}, "seed"),
+        ((1.0, 1.0), {"seed": np.int64(-2)}, "`seed` = -2"),
+        ((1.0, 1.0), {"substeps": "2"}, "substeps"),
         ((1.0, 1.0), {"substeps": 0}, "substeps"),
         ((1.0, 1.0), {"substeps": -3}, "substeps"),
         ((1.0, 1.0), {"substeps": 2**40}, "substeps"),
@@ -345,6 +347,12 @@ def test_steps_go_on_from_the_state_they_made(free_dimers):
 def test_bad_thermostats_are_refused(args, kwargs, words):
     with pytest.raises(geoshake.InvalidInputError, match=words):
         geoshake.Langevin(*args, **kwargs)
+
+
+def test_a_thermostat_takes_numpy_integers():
+    th = geoshake.Langevin(1.0, 1.0, seed=np.uint64(7), substeps=np.int32(2))
+    assert (th.seed, th.substeps) == (7, 2)
+    assert th.member(np.int64(3)) == th.member(3)
 
 
 def test_a_thermostat_is_refused_to_shake_and_must_be_a_langevin(free_dimers):

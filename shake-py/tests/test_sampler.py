@@ -182,8 +182,8 @@ def test_one_start_per_chain():
         ([0.0, 0.0, 1.0], {"density": "uniform"}, geoshake.InvalidInputError, "density"),
         # Looser than 1e-9 the step back could miss by the reverse check's
         # own tolerance.
-        ([0.0, 0.0, 1.0], {"newton_tolerance": 1e-3}, geoshake.InvalidInputError, "step_tolerance"),
-        ([0.0, 0.0, 1.0], {"newton_tolerance": float("nan")}, geoshake.InvalidInputError, "step_tolerance"),
+        ([0.0, 0.0, 1.0], {"newton_tolerance": 1e-3}, geoshake.InvalidInputError, "`newton_tolerance`"),
+        ([0.0, 0.0, 1.0], {"newton_tolerance": float("nan")}, geoshake.InvalidInputError, "`newton_tolerance`"),
     ],
 )
 def test_bad_input_is_refused_with_the_package_errors(q0, kw, error, says):

@@ -276,6 +276,29 @@ def test_counts_out_of_range_are_the_packages_error_naming_them(kw, says):
         geoshake.rattle(sys, z0, 0.01, steps=2.0)
 
 
+def test_numpy_integers_are_counts():
+    # A count computed with NumPy (np.int64, np.uint32) was a TypeError:
+    # counts are read as operator.index reads them, as range() does.
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.0, 0.0])
+    plain = geoshake.rattle(sys, z0, 0.01, steps=20, stride=5)
+    numpy = geoshake.rattle(sys, z0, 0.01, steps=np.int64(20), stride=np.uint32(5), max_iterations=np.int16(50))
+    assert np.array_equal(plain.trajectory, numpy.trajectory)
+    with pytest.raises(geoshake.InvalidInputError) as info:
+        geoshake.rattle(sys, z0, 0.01, steps=np.int64(-1))
+    assert "`steps` = -1" in str(info.value)
+    for wrong in (np.float64(20.0), np.bool_(True), True, "20"):
+        with pytest.raises(TypeError):
+            geoshake.rattle(sys, z0, 0.01, steps=wrong)
+
+
+def test_results_and_systems_name_the_package():
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    r = geoshake.rattle(sys, np.array([0.0, -1.0, 0.0, 0.0]), 0.01, steps=2)
+    assert type(r).__module__ == "geoshake"
+    assert type(sys).__module__ == "geoshake"
+
+
 def test_a_constant_outside_a_function_domain_is_a_declaration_error():
     # sqrt(-1) in H was accepted, and H was NaN at every state.
     with pytest.raises(geoshake.DeclarationError) as info:
