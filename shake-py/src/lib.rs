@@ -98,6 +98,11 @@ struct System {
     model: Model,
     name: String,
     parameters: Vec<(String, f64)>,
+    /// What rebuilds it ([`System::__reduce__`]): the declaration's source
+    /// (None for a compiled model, found by `name`) and the parameters as
+    /// they were given.
+    source: Option<String>,
+    given: Vec<(String, f64)>,
 }
 
 #[pymethods]
@@ -191,6 +196,21 @@ impl System {
         Ok(g.into_pyarray(py))
     }
 
+    /// Pickling (`pickle`, `multiprocessing`, `copy.deepcopy`): a system
+    /// is rebuilt from its declaration or its model's name and the
+    /// parameters as given, and so takes the same steps bit for bit.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let rebuild = py
+            .import("geoshake._geoshake")?
+            .getattr("_rebuild_system")?;
+        let given = PyDict::new(py);
+        for (k, v) in &self.given {
+            given.set_item(k, v)?;
+        }
+        let args = (self.source.as_deref(), self.name.as_str(), given).into_pyobject(py)?;
+        Ok((rebuild, args.into_any()))
+    }
+
     fn __repr__(&self) -> String {
         let ps: Vec<String> = self
             .parameters
@@ -242,7 +262,23 @@ fn declare(source: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<Sys
         name: sys.name().to_string(),
         parameters,
         model: Model::Declared(sys),
+        source: Some(source.to_string()),
+        given,
     })
+}
+
+/// The inverse of [`System::__reduce__`]: the declaration `source` (or,
+/// for None, the compiled model `name`) with the parameters `given`.
+#[pyfunction]
+fn _rebuild_system(
+    source: Option<&str>,
+    name: &str,
+    given: &Bound<'_, PyDict>,
+) -> PyResult<System> {
+    match source {
+        Some(source) => declare(source, Some(given)),
+        None => model(name, Some(given)),
+    }
 }
 
 /// The parameters given by keyword, as (name, value) pairs.
@@ -328,6 +364,8 @@ fn model(name: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<System>
             .iter()
             .map(|n| (n.to_string(), get(n).unwrap_or(f64::NAN)))
             .collect(),
+        source: None,
+        given,
     })
 }
 
@@ -869,6 +907,7 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(declare, m)?)?;
     m.add_function(wrap_pyfunction!(particles::declare_particles, m)?)?;
     m.add_function(wrap_pyfunction!(model, m)?)?;
+    m.add_function(wrap_pyfunction!(_rebuild_system, m)?)?;
     m.add_function(wrap_pyfunction!(model_names, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(ensemble, m)?)?;

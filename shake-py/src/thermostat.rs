@@ -113,6 +113,22 @@ impl Langevin {
         Ok(self.for_member(i))
     }
 
+    /// Pickling: the constructor's arguments, ((friction, kT, seed),
+    /// {"substeps": K}), so that a thermostat sent to another process
+    /// draws the same noise.
+    #[allow(non_snake_case)]
+    fn __getnewargs_ex__(
+        &self,
+    ) -> (
+        (f64, f64, u64),
+        std::collections::HashMap<&'static str, usize>,
+    ) {
+        (
+            (self.friction(), self.kT(), self.seed()),
+            [("substeps", self.substeps())].into_iter().collect(),
+        )
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "geoshake.Langevin(friction={:?}, kT={:?}, seed={}, substeps={})",

@@ -7,6 +7,7 @@ free or in a harmonic trap V = (k/2) Σ_a |x_a|², the trap declared as a
 potential family or brought as a callable."""
 
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -353,6 +354,20 @@ def test_a_thermostat_takes_numpy_integers():
     th = geoshake.Langevin(1.0, 1.0, seed=np.uint64(7), substeps=np.int32(2))
     assert (th.seed, th.substeps) == (7, 2)
     assert th.member(np.int64(3)) == th.member(3)
+
+
+def test_a_thermostat_pickles_and_draws_the_same_noise(free_dimers):
+    th = geoshake.Langevin(0.5, 1.0, seed=2**63 + 5, substeps=3)
+    masses, bonds, q, p = dimers(seed=4)
+    for protocol in range(2, pickle.HIGHEST_PROTOCOL + 1):
+        back = pickle.loads(pickle.dumps(th, protocol=protocol))
+        assert back == th and (back.seed, back.substeps) == (2**63 + 5, 3)
+    runs = []
+    for t in (th, back):
+        rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.05, thermostat=t)
+        q0, p0 = rattle.project(q, p)
+        runs.append(rattle.run(q0, p0, 10))
+    np.testing.assert_array_equal(runs[0].p, runs[1].p)
 
 
 def test_a_thermostat_is_refused_to_shake_and_must_be_a_langevin(free_dimers):

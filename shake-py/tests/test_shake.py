@@ -6,6 +6,8 @@ models do: the comparisons allow a few ulps of the state, far below any
 O(h) difference a wrong derivative would make.
 """
 
+import copy
+import pickle
 import subprocess
 import sys
 
@@ -297,6 +299,39 @@ def test_results_and_systems_name_the_package():
     r = geoshake.rattle(sys, np.array([0.0, -1.0, 0.0, 0.0]), 0.01, steps=2)
     assert type(r).__module__ == "geoshake"
     assert type(sys).__module__ == "geoshake"
+
+
+@pytest.mark.parametrize("protocol", range(pickle.HIGHEST_PROTOCOL + 1))
+def test_systems_pickle_and_take_the_same_steps(protocol):
+    # A system sent to another process (multiprocessing, joblib) is rebuilt
+    # from its declaration or model name and the parameters as given.
+    z0 = np.array([0.0, -1.0, 0.3, 0.0])
+    declared = geoshake.declare(PENDULUM, length=1.0, gravity=9.81)
+    compiled = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    for sys in (declared, compiled):
+        back = pickle.loads(pickle.dumps(sys, protocol=protocol))
+        assert type(back) is type(sys) and repr(back) == repr(sys)
+        assert back.compiled == sys.compiled and back.parameters == sys.parameters
+        a = geoshake.rattle(sys, z0, 0.01, steps=50)
+        b = geoshake.rattle(back, z0, 0.01, steps=50)
+        assert np.array_equal(a.trajectory, b.trajectory)
+    assert copy.deepcopy(declared).compiled is False
+
+
+def _rattle_50(sys, z0):
+    return geoshake.rattle(sys, z0, 0.01, steps=50).trajectory
+
+
+def test_a_system_runs_in_a_spawned_process():
+    # What a ProcessPoolExecutor does with a system given as an argument:
+    # pickle it, start a fresh interpreter, unpickle and run it there.
+    import multiprocessing
+
+    sys = geoshake.declare(PENDULUM, length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.3, 0.0])
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        there = pool.apply(_rattle_50, (sys, z0))
+    assert np.array_equal(there, _rattle_50(sys, z0))
 
 
 def test_a_constant_outside_a_function_domain_is_a_declaration_error():
