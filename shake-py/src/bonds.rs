@@ -126,7 +126,7 @@ impl Bonds {
         tolerance: f64,
         max_iterations: Whole,
     ) -> PyResult<Self> {
-        let max_iterations = max_iterations.count("max_iterations", 0)?;
+        let max_iterations = max_iterations.budget("max_iterations")?;
         if pairs.len() != lengths.len() {
             return Err(InvalidInputError::new_err(format!(
                 "{} pairs but {} lengths",

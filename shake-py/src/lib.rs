@@ -31,61 +31,61 @@ use pyo3::types::PyDict;
 use whole::Whole;
 
 create_exception!(
-    _geoshake,
+    geoshake,
     ShakeError,
     PyException,
     "Every error of shake. A run's errors carry `step`, `time`, `residual` (NaN when the error has none) and the partial trajectory (`trajectory`, `times`, `steps`, `lambda_`, `sigma`)."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     DeclarationError,
     ShakeError,
     "A declaration refused: `message`, and `line`, `column` (1-based) of the offending token in the string."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     ParameterError,
     ShakeError,
     "A parameter unknown, missing or given twice."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     InvalidInputError,
     ShakeError,
     "An unusable argument: h = 0 or not finite, a state of the wrong dimension, ..."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     NonFiniteError,
     ShakeError,
     "A state (given or computed) has a NaN or infinite entry."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     NewtonError,
     ShakeError,
     "A Newton iteration did not converge (`residual` is its last residual)."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     NondegeneracyError,
     ShakeError,
     "N = {{H,g_i},g_j} became singular or ill-conditioned (the paper's nondegeneracy assumption)."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     ComponentJumpError,
     ShakeError,
     "det N changed sign: the trajectory jumped to another component of M^H (Section 5.4.2)."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     FibreJumpError,
     ShakeError,
     "Newton along a fibre converged far from its linear prediction (a fold or another component)."
 );
 create_exception!(
-    _geoshake,
+    geoshake,
     NotOnConstraintError,
     ShakeError,
     "The initial state is not on M = {g = 0} (`residual` is |g|)."
@@ -200,22 +200,23 @@ impl System {
     /// is rebuilt from its declaration or its model's name and the
     /// parameters as given, and so takes the same steps bit for bit.
     fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-        let rebuild = py
-            .import("geoshake._geoshake")?
-            .getattr("_rebuild_system")?;
         let given = PyDict::new(py);
         for (k, v) in &self.given {
             given.set_item(k, v)?;
         }
-        let args = (self.source.as_deref(), self.name.as_str(), given).into_pyobject(py)?;
-        Ok((rebuild, args.into_any()))
+        reduce(
+            py,
+            "_rebuild_system",
+            (self.source.as_deref(), self.name.as_str(), given),
+        )
     }
 
     fn __repr__(&self) -> String {
-        let ps: Vec<String> = self
+        // (", length=1, gravity=9.81", or nothing without parameters.)
+        let ps: String = self
             .parameters
             .iter()
-            .map(|(k, v)| format!("{k}={v}"))
+            .map(|(k, v)| format!(", {k}={v}"))
             .collect();
         let how = if self.compiled() {
             "compiled"
@@ -223,11 +224,10 @@ impl System {
             "declared"
         };
         format!(
-            "<geoshake.System {} ({how}, d={}, m={}, {})>",
+            "<geoshake.System {} ({how}, d={}, m={}{ps})>",
             self.name,
             self.dof(),
             self.constraint_count(),
-            ps.join(", ")
         )
     }
 }
@@ -267,6 +267,18 @@ fn declare(source: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<Sys
     })
 }
 
+/// What `__reduce__` returns for pickling: the extension module's
+/// function `rebuild` (pickled by reference) and the arguments it takes.
+pub(crate) fn reduce<'py, A: pyo3::IntoPyObjectExt<'py>>(
+    py: Python<'py>,
+    rebuild: &str,
+    args: A,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let f = py.import("geoshake._geoshake")?.getattr(rebuild)?;
+    let args = args.into_bound_py_any(py)?;
+    Ok((f, args))
+}
+
 /// The inverse of [`System::__reduce__`]: the declaration `source` (or,
 /// for None, the compiled model `name`) with the parameters `given`.
 #[pyfunction]
@@ -281,12 +293,34 @@ fn _rebuild_system(
     }
 }
 
-/// The parameters given by keyword, as (name, value) pairs.
+/// The parameters given by keyword, as (name, value) pairs: each a real
+/// number (a Python or NumPy int or float), else `ParameterError` naming
+/// it; a bool is not taken for 0 or 1, and an int beyond f64's range is
+/// refused, not an `OverflowError`. Whether a value is finite is the
+/// declaration's (or the model's) check.
 fn keyword_parameters(parameters: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, f64)>> {
     let mut given = Vec::new();
     if let Some(ps) = parameters {
         for (k, v) in ps.iter() {
-            given.push((k.extract()?, v.extract()?));
+            let name: String = k.extract()?;
+            let value = if v.is_instance_of::<pyo3::types::PyBool>() {
+                None
+            } else {
+                v.extract::<f64>().ok()
+            };
+            let Some(value) = value else {
+                let mut shown = v
+                    .repr()
+                    .map_or_else(|_| "that".to_string(), |r| r.to_string());
+                if let Some((cut, _)) = shown.char_indices().nth(40) {
+                    shown.truncate(cut);
+                    shown.push('…');
+                }
+                return Err(ParameterError::new_err(format!(
+                    "parameter `{name}` must be a real number within f64's range, not {shown}"
+                )));
+            };
+            given.push((name, value));
         }
     }
     Ok(given)
@@ -339,17 +373,21 @@ fn model(name: &str, parameters: Option<&Bound<'_, PyDict>>) -> PyResult<System>
         .iter()
         .find(|m| m.0 == name)
         .ok_or_else(|| ParameterError::new_err(format!("no compiled model `{name}`")))?;
-    let mut given: Vec<(String, f64)> = Vec::new();
-    if let Some(ps) = parameters {
-        for (k, v) in ps.iter() {
-            let k: String = k.extract()?;
-            if !spec.1.contains(&k.as_str()) {
-                return Err(ParameterError::new_err(format!(
-                    "unknown parameter `{k}`; {name}'s parameters are: {}",
-                    spec.1.join(", ")
-                )));
-            }
-            given.push((k, v.extract()?));
+    let given = keyword_parameters(parameters)?;
+    for (k, v) in &given {
+        if !spec.1.contains(&k.as_str()) {
+            return Err(ParameterError::new_err(format!(
+                "unknown parameter `{k}`; {name}'s parameters are: {}",
+                spec.1.join(", ")
+            )));
+        }
+        // As a declaration refuses it: a NaN or infinite parameter would
+        // only show later, as a state off M or a Newton failure.
+        if !v.is_finite() {
+            return Err(declare_error(DeclareError::NonFiniteParameter {
+                name: k.clone(),
+                value: *v,
+            }));
         }
     }
     let get = |n: &str| given.iter().find(|g| g.0 == n).map(|g| g.1);
@@ -409,6 +447,36 @@ impl Result_ {
 
     fn __repr__(&self, py: Python<'_>) -> String {
         format!("<geoshake.Result: {} states>", self.__len__(py))
+    }
+
+    /// Pickling: the arrays, as they are.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let arrays = (
+            &self.trajectory,
+            &self.times,
+            &self.steps,
+            &self.lambda_,
+            &self.sigma,
+        );
+        reduce(py, "_rebuild_result", arrays)
+    }
+}
+
+/// The inverse of `Result.__reduce__`.
+#[pyfunction]
+fn _rebuild_result(
+    trajectory: Py<PyArray2<f64>>,
+    times: Py<PyArray1<f64>>,
+    steps: Py<PyArray1<u64>>,
+    lambda_: Py<PyArray2<f64>>,
+    sigma: Py<PyArray2<f64>>,
+) -> Result_ {
+    Result_ {
+        trajectory,
+        times,
+        steps,
+        lambda_,
+        sigma,
     }
 }
 
@@ -494,7 +562,12 @@ fn typed_error(py: Python<'_>, e: &StepError) -> PyErr {
             };
             (NewtonError::new_err(msg), *t, r)
         }
-        StepError::NondegeneracyLost { t, .. } => (NondegeneracyError::new_err(msg), *t, nan),
+        // SHAKE's matrix singular: the step's Newton iteration cannot go on.
+        StepError::SingularShakeJacobian { t, .. } => (NewtonError::new_err(msg), *t, nan),
+        StepError::NondegeneracyLost { t, .. }
+        | StepError::SingularNondegeneracyMatrix { t, .. } => {
+            (NondegeneracyError::new_err(msg), *t, nan)
+        }
         StepError::ComponentJump { t, .. } => (ComponentJumpError::new_err(msg), *t, nan),
         StepError::FibreJump { t, .. } => (FibreJumpError::new_err(msg), *t, nan),
         // Only composed steps are checked by stepping back, and Python runs
@@ -503,8 +576,6 @@ fn typed_error(py: Python<'_>, e: &StepError) -> PyErr {
         StepError::NotOnConstraint { t, residual, .. } => {
             (NotOnConstraintError::new_err(msg), *t, *residual)
         }
-        #[allow(unreachable_patterns)]
-        _ => (ShakeError::new_err(msg), nan, nan),
     };
     let v = err.value(py);
     let _ = v.setattr("step", e.step());
@@ -599,10 +670,12 @@ fn plan(
     newton_tolerance: Option<f64>,
     max_iterations: Option<Whole>,
 ) -> PyResult<Plan> {
+    // (A run too long is refused by the runtime, as an error of the run
+    // with its step and time.)
     let steps = steps.map(|n| n.within("steps", 0, u64::MAX)).transpose()?;
     let stride = stride.within("stride", 0, u64::MAX)?;
     let max_iterations = max_iterations
-        .map(|n| n.count("max_iterations", 0))
+        .map(|n| n.budget("max_iterations"))
         .transpose()?;
     let stop = match (steps, time) {
         (Some(n), None) => Stop::Steps(n),
@@ -908,6 +981,10 @@ fn _geoshake(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(particles::declare_particles, m)?)?;
     m.add_function(wrap_pyfunction!(model, m)?)?;
     m.add_function(wrap_pyfunction!(_rebuild_system, m)?)?;
+    m.add_function(wrap_pyfunction!(_rebuild_result, m)?)?;
+    m.add_function(wrap_pyfunction!(particles::_rebuild_particle_run, m)?)?;
+    m.add_function(wrap_pyfunction!(particles::_rebuild_constraint_forces, m)?)?;
+    m.add_function(wrap_pyfunction!(thermostat::_rebuild_langevin, m)?)?;
     m.add_function(wrap_pyfunction!(model_names, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(ensemble, m)?)?;

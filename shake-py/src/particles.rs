@@ -183,7 +183,7 @@ impl DeclaredParticles {
         let options = Options {
             tol: tolerance.unwrap_or(defaults.tol),
             max_iter: match max_iterations {
-                Some(n) => n.count("max_iterations", 0)?,
+                Some(n) => n.budget("max_iterations")?,
                 None => defaults.max_iter,
             },
             method,
@@ -347,7 +347,7 @@ fn same(a: &ParticleState, b: &ParticleState) -> bool {
 /// refused before any work: a run of them would be an empty run carrying
 /// an error that a caller who does not look at `error` never sees.
 fn run_arguments(steps: Whole, stride: Whole, t0: f64) -> PyResult<(u64, u64)> {
-    let steps = steps.within("steps", 0, u64::MAX)?;
+    let steps = steps.steps()?;
     let stride = stride.within("stride", 0, u64::MAX)?;
     if stride == 0 {
         return Err(InvalidInputError::new_err(
@@ -460,6 +460,30 @@ impl ParticleRun {
         };
         format!("<geoshake.ParticleRun: {} frames, {how}>", self.__len__(py))
     }
+
+    /// Pickling: the arrays and the error, as they are.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let fields = (&self.q, &self.p, &self.time, &self.step, &self.error);
+        crate::reduce(py, "_rebuild_particle_run", fields)
+    }
+}
+
+/// The inverse of `ParticleRun.__reduce__`.
+#[pyfunction]
+pub(crate) fn _rebuild_particle_run(
+    q: Py<PyArray3<f64>>,
+    p: Py<PyArray3<f64>>,
+    time: Py<PyArray1<f64>>,
+    step: Py<PyArray1<u64>>,
+    error: Option<Py<PyAny>>,
+) -> ParticleRun {
+    ParticleRun {
+        q,
+        p,
+        time,
+        step,
+        error,
+    }
 }
 
 /// The constraint forces of one step, their multipliers and their virial
@@ -495,6 +519,28 @@ pub(crate) struct ConstraintForces {
 impl ConstraintForces {
     fn __repr__(&self) -> String {
         format!("<geoshake.ConstraintForces at t = {}>", self.time)
+    }
+
+    /// Pickling: the arrays and the time, as they are.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let fields = (&self.forces, &self.virial, &self.multipliers, self.time);
+        crate::reduce(py, "_rebuild_constraint_forces", fields)
+    }
+}
+
+/// The inverse of `ConstraintForces.__reduce__`.
+#[pyfunction]
+pub(crate) fn _rebuild_constraint_forces(
+    forces: Py<PyArray2<f64>>,
+    virial: Py<PyArray2<f64>>,
+    multipliers: Py<PyArray1<f64>>,
+    time: f64,
+) -> ConstraintForces {
+    ConstraintForces {
+        forces,
+        virial,
+        multipliers,
+        time,
     }
 }
 

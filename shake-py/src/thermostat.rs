@@ -2,7 +2,7 @@
 //! `geoshake::runtime::particles::Langevin`) as a value given to
 //! `DeclaredParticles.system(..., thermostat=)`.
 
-use geoshake::runtime::particles::Langevin as Thermostat;
+use geoshake::runtime::particles::{Langevin as Thermostat, MAX_SUBSTEPS};
 use pyo3::prelude::*;
 
 use crate::bonds::error;
@@ -67,10 +67,7 @@ impl Langevin {
             None => 0,
         };
         let substeps = match substeps {
-            // (Beyond usize, the runtime's own refusal of a K too large.)
-            Some(k) => {
-                usize::try_from(Whole::read(k, "substeps", 0, u64::MAX)?).unwrap_or(usize::MAX)
-            }
+            Some(k) => Whole::read(k, "substeps", 1, MAX_SUBSTEPS as u64)? as usize,
             None => 1,
         };
         let inner = Thermostat::new(gamma, kt, seed)
@@ -113,20 +110,11 @@ impl Langevin {
         Ok(self.for_member(i))
     }
 
-    /// Pickling: the constructor's arguments, ((friction, kT, seed),
-    /// {"substeps": K}), so that a thermostat sent to another process
-    /// draws the same noise.
-    #[allow(non_snake_case)]
-    fn __getnewargs_ex__(
-        &self,
-    ) -> (
-        (f64, f64, u64),
-        std::collections::HashMap<&'static str, usize>,
-    ) {
-        (
-            (self.friction(), self.kT(), self.seed()),
-            [("substeps", self.substeps())].into_iter().collect(),
-        )
+    /// Pickling (every protocol): the constructor's arguments, so that a
+    /// thermostat sent to another process draws the same noise.
+    fn __reduce__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+        let args = (self.friction(), self.kT(), self.seed(), self.substeps());
+        crate::reduce(py, "_rebuild_langevin", args)
     }
 
     fn __repr__(&self) -> String {
@@ -158,4 +146,18 @@ impl Langevin {
             .expect("the parameters of a thermostat already made");
         Langevin { inner }
     }
+}
+
+/// The inverse of `Langevin.__reduce__`: `Langevin(friction, kT, seed,
+/// substeps=substeps)`, with its checks.
+#[pyfunction]
+#[allow(non_snake_case)]
+pub(crate) fn _rebuild_langevin(
+    py: Python<'_>,
+    friction: &Bound<'_, PyAny>,
+    kT: &Bound<'_, PyAny>,
+    seed: &Bound<'_, PyAny>,
+    substeps: &Bound<'_, PyAny>,
+) -> PyResult<Langevin> {
+    Langevin::new(py, friction, kT, Some(seed), Some(substeps))
 }

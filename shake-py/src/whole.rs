@@ -35,15 +35,24 @@ impl<'py> FromPyObject<'_, 'py> for Whole {
         if obj.is_instance_of::<PyBool>() || obj.is_instance_of::<PyFloat>() {
             return Err(refused()?);
         }
-        // `operator.index(obj)`: the int itself, or what `__index__` gives
-        // (NumPy's integers); an object without it is not an integer.
+        // `operator.index(obj)`: the int itself, or what its type's
+        // `__index__` gives (NumPy's integers); a type without one is not
+        // an integer, and an exception `__index__` raises is passed on
+        // (KeyboardInterrupt included), as operator.index passes it on.
         let int = if obj.is_instance_of::<PyInt>() {
             obj.to_owned()
         } else {
-            match obj.call_method0(intern!(obj.py(), "__index__")) {
-                Ok(i) if i.is_instance_of::<PyInt>() => i,
-                _ => return Err(refused()?),
+            let Ok(index) = obj.get_type().getattr(intern!(obj.py(), "__index__")) else {
+                return Err(refused()?);
+            };
+            let i = index.call1((obj,))?;
+            if !i.is_instance_of::<PyInt>() {
+                return Err(PyTypeError::new_err(format!(
+                    "__index__ returned non-int (type {})",
+                    i.get_type().name()?
+                )));
             }
+            i
         };
         Ok(match int.extract::<u64>() {
             Ok(v) => Whole::Fits(v),
@@ -73,11 +82,34 @@ impl Whole {
     pub(crate) fn read(obj: &Bound<'_, PyAny>, what: &str, lo: u64, hi: u64) -> PyResult<u64> {
         match obj.extract::<Whole>() {
             Ok(w) => w.within(what, lo, hi),
-            Err(e) => Err(InvalidInputError::new_err(format!(
-                "invalid `{what}`: {}",
-                e.value(obj.py())
-            ))),
+            Err(e) if e.is_instance_of::<PyTypeError>(obj.py()) => Err(InvalidInputError::new_err(
+                format!("invalid `{what}`: {}", e.value(obj.py())),
+            )),
+            // (What `__index__` itself raised, KeyboardInterrupt included.)
+            Err(e) => Err(e),
         }
+    }
+
+    /// A Newton iteration budget `what`: 1 to the runtime's
+    /// [`MAX_ITERATIONS`](geoshake::validate::MAX_ITERATIONS).
+    pub(crate) fn budget(self, what: &str) -> PyResult<usize> {
+        let most = geoshake::validate::MAX_ITERATIONS as u64;
+        Ok(self.within(what, 1, most)? as usize)
+    }
+
+    /// A particle run's number of steps: 0 to the runtime's
+    /// [`MAX_STEPS`](geoshake::validate::MAX_STEPS), so that a run too
+    /// long is refused here rather than returned empty with its error.
+    pub(crate) fn steps(self) -> PyResult<u64> {
+        self.within("steps", 0, geoshake::validate::MAX_STEPS)
+            .map_err(|e| {
+                Python::attach(|py| {
+                    InvalidInputError::new_err(format!(
+                        "{} = 2^53 (step indices beyond are not exact in f64)",
+                        e.value(py)
+                    ))
+                })
+            })
     }
 
     /// [`Whole::within`] as a `usize`.

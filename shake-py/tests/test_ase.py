@@ -131,6 +131,8 @@ def test_ase_machinery_accepts_it():
     twin.set_positions(twin.positions + 0.01)
     assert type(c.copy()) is FixBondLengths
     np.testing.assert_array_equal(c.copy().pairs, c.pairs)
+    c.maxiter = 7  # a budget set on the instance goes with its copies
+    assert c.copy().maxiter == 7 and FixBondLengths(pairs).maxiter == 50
     assert pickle.loads(pickle.dumps(c)).pairs.shape == (24, 2)
     assert copy.deepcopy(c)._bonds is None
     # A slice keeps the bonds of the molecules it keeps, renumbered.

@@ -343,6 +343,7 @@ def test_steps_go_on_from_the_state_they_made(free_dimers):
         ((1.0, 1.0), {"substeps": 0}, "substeps"),
         ((1.0, 1.0), {"substeps": -3}, "substeps"),
         ((1.0, 1.0), {"substeps": 2**40}, "substeps"),
+        ((1.0, 1.0), {"substeps": 2**20 + 1}, "an integer from 1 to 1048576"),
     ],
 )
 def test_bad_thermostats_are_refused(args, kwargs, words):
@@ -359,7 +360,7 @@ def test_a_thermostat_takes_numpy_integers():
 def test_a_thermostat_pickles_and_draws_the_same_noise(free_dimers):
     th = geoshake.Langevin(0.5, 1.0, seed=2**63 + 5, substeps=3)
     masses, bonds, q, p = dimers(seed=4)
-    for protocol in range(2, pickle.HIGHEST_PROTOCOL + 1):
+    for protocol in range(pickle.HIGHEST_PROTOCOL + 1):
         back = pickle.loads(pickle.dumps(th, protocol=protocol))
         assert back == th and (back.seed, back.substeps) == (2**63 + 5, 3)
     runs = []
@@ -368,6 +369,37 @@ def test_a_thermostat_pickles_and_draws_the_same_noise(free_dimers):
         q0, p0 = rattle.project(q, p)
         runs.append(rattle.run(q0, p0, 10))
     np.testing.assert_array_equal(runs[0].p, runs[1].p)
+
+
+def test_runs_and_constraint_forces_pickle(trapped_dimers):
+    # What a worker process returns: plain data, error included.
+    masses, bonds, q, p = dimers(count=3, seed=5)
+    rattle = trapped_dimers.system(masses, {"bonds": bonds, "traps": traps_table(len(masses))}, h=0.05)
+    q0, p0 = rattle.project(q, p)
+    run = rattle.run(q0, p0, 5)
+    fc = rattle.constraint_forces(*rattle.step(q0, p0))
+    for protocol in range(pickle.HIGHEST_PROTOCOL + 1):
+        r = pickle.loads(pickle.dumps(run, protocol=protocol))
+        for name in ("q", "p", "time", "step"):
+            np.testing.assert_array_equal(getattr(r, name), getattr(run, name))
+        assert r.error is None and len(r) == len(run)
+        f = pickle.loads(pickle.dumps(fc, protocol=protocol))
+        for name in ("forces", "virial", "multipliers"):
+            np.testing.assert_array_equal(getattr(f, name), getattr(fc, name))
+        assert f.time == fc.time
+    failed = rattle.run(q0, p0 * 1e300, 3)
+    assert isinstance(failed.error, geoshake.ShakeError)
+    back = pickle.loads(pickle.dumps(failed))
+    assert type(back.error) is type(failed.error) and str(back.error) == str(failed.error)
+
+
+def test_a_run_too_long_is_refused_before_any_step(free_dimers):
+    # It was returned as an empty run whose `error` said so.
+    masses, bonds, q, p = dimers(count=2)
+    rattle = free_dimers.system(masses, {"bonds": bonds}, h=0.01)
+    for call in (lambda: rattle.run(q, p, 2**60), lambda: rattle.ensemble(q[None], p[None], 2**60)):
+        with pytest.raises(geoshake.InvalidInputError, match="`steps` = 1152921504606846976"):
+            call()
 
 
 def test_a_thermostat_is_refused_to_shake_and_must_be_a_langevin(free_dimers):

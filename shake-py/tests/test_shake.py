@@ -334,6 +334,92 @@ def test_a_system_runs_in_a_spawned_process():
     assert np.array_equal(there, _rattle_50(sys, z0))
 
 
+def _fail_off_m(sys):
+    return geoshake.rattle(sys, np.array([2.0, 0.0, 0.0, 0.0]), 0.01, steps=5, project=False)
+
+
+def test_errors_and_results_pickle_with_what_they_carry():
+    # A worker's error or result crossed back to the parent as
+    # MaybeEncodingError: the exceptions said module `_geoshake`.
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    with pytest.raises(geoshake.NotOnConstraintError) as info:
+        _fail_off_m(sys)
+    e = info.value
+    back = pickle.loads(pickle.dumps(e))
+    assert type(back) is geoshake.NotOnConstraintError and str(back) == str(e)
+    assert (back.step, back.time, back.residual) == (e.step, e.time, e.residual)
+    assert np.array_equal(back.trajectory, e.trajectory)
+    r = geoshake.rattle(sys, np.array([0.0, -1.0, 0.3, 0.0]), 0.01, steps=5)
+    for protocol in range(pickle.HIGHEST_PROTOCOL + 1):
+        b = pickle.loads(pickle.dumps(r, protocol=protocol))
+        for name in ("trajectory", "times", "steps", "lambda_", "sigma"):
+            assert np.array_equal(getattr(b, name), getattr(r, name), equal_nan=name != "steps")
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        with pytest.raises(geoshake.NotOnConstraintError):
+            pool.apply(_fail_off_m, (sys,))
+
+
+def test_a_singular_n_is_a_nondegeneracy_error_with_its_time():
+    # g = (|q|² − 1)²: ∇g = 0 on M, N = {{H,g},g} = 0. It was the base class
+    # with time NaN.
+    d = geoshake.declare(
+        "struct D { dof q[2], p[2]; hamiltonian = (p[0]^2+p[1]^2)/2; constraints { c: (q[0]^2+q[1]^2-1)^2 } }"
+    )
+    with pytest.raises(geoshake.NondegeneracyError) as info:
+        geoshake.rattle(d, [1.0, 0.0, 0.0, 1.0], 0.01, steps=3)
+    assert info.value.time == 0.0
+    assert repr(d) == "<geoshake.System D (declared, d=2, m=1)>"
+
+
+@pytest.mark.parametrize(
+    "make, says",
+    [
+        (lambda: geoshake.models.Pendulum(length=float("nan"), gravity=1.0), "length"),
+        (lambda: geoshake.models.Pendulum(length=1.0, gravity=float("inf")), "gravity"),
+        (lambda: geoshake.declare(PENDULUM, length=True, gravity=9.81), "`length` must be a real number"),
+        (lambda: geoshake.declare(PENDULUM, length="1", gravity=9.81), "`length` must be a real number"),
+        (lambda: geoshake.declare(PENDULUM, length=10**400, gravity=9.81), "`length` must be a real number"),
+        (lambda: geoshake.models.Pendulum(length=1.0, gravity=None), "`gravity` must be a real number"),
+    ],
+)
+def test_parameters_must_be_finite_real_numbers(make, says):
+    with pytest.raises(geoshake.ParameterError) as info:
+        make()
+    assert says in str(info.value), str(info.value)
+
+
+def test_iteration_budgets_say_their_range():
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.0, 0.0])
+    for bad in (0, -1, 10**6):
+        with pytest.raises(geoshake.InvalidInputError, match="an integer from 1 to 10000"):
+            geoshake.rattle(sys, z0, 0.01, steps=5, max_iterations=bad)
+
+
+def test_what_an_index_method_raises_is_passed_on():
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.0, 0.0])
+
+    class Broken:
+        def __index__(self):
+            raise ValueError("no count here")
+
+    class NotInt:
+        def __index__(self):
+            return 2.5
+
+    with pytest.raises(ValueError, match="no count here"):
+        geoshake.rattle(sys, z0, 0.01, steps=Broken())
+    with pytest.raises(TypeError, match="non-int"):
+        geoshake.rattle(sys, z0, 0.01, steps=NotInt())
+    plain = object.__new__(type("Plain", (), {}))
+    plain.__index__ = lambda: 5  # on the instance: not an integer type
+    with pytest.raises(TypeError):
+        geoshake.rattle(sys, z0, 0.01, steps=plain)
+
+
 def test_a_constant_outside_a_function_domain_is_a_declaration_error():
     # sqrt(-1) in H was accepted, and H was NaN at every state.
     with pytest.raises(geoshake.DeclarationError) as info:

@@ -132,7 +132,11 @@ class FixBondLengths(_Base):
 
     def copy(self):
         lengths = None if self.bondlengths is None else np.array(self.bondlengths)
-        return FixBondLengths(self.pairs.copy(), self.tolerance, lengths)
+        c = FixBondLengths(self.pairs.copy(), self.tolerance, lengths)
+        # (A budget set on this instance goes with it.)
+        if "maxiter" in self.__dict__:
+            c.maxiter = self.maxiter
+        return c
 
     def index_shuffle(self, atoms, ind):
         """Renumbers the pairs for ``atoms[ind]``, keeping the bonds whose

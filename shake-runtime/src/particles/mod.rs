@@ -92,5 +92,5 @@ pub use state::ParticleState;
 pub use stencil::Stencil;
 pub use system::ParticleSystem;
 pub use table::Table;
-pub use thermostat::Langevin;
+pub use thermostat::{Langevin, MAX_SUBSTEPS};
 pub use virial::ConstraintForces;

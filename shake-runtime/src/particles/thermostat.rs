@@ -3,6 +3,11 @@
 
 use crate::error::StepError;
 
+/// The most RATTLE substeps per drift of g-BAOAB
+/// ([`Langevin::geodesic`]): beyond 2²⁰ a drift's substeps are smaller
+/// than any step a simulation would take, and a run would not end.
+pub const MAX_SUBSTEPS: usize = 1 << 20;
+
 /// A Langevin thermostat: dp = −∇V dt − γ p dt + √(2 γ k_B T) M^{1/2} dW
 /// on T*M, integrated by (g-)BAOAB with the constraints kept by RATTLE.
 ///
@@ -74,9 +79,10 @@ impl Langevin {
         })
     }
 
-    /// g-BAOAB: each drift A made of K ≥ 1 RATTLE substeps of h/(2K).
+    /// g-BAOAB: each drift A made of K ≥ 1 RATTLE substeps of h/(2K), K
+    /// at most [`MAX_SUBSTEPS`].
     pub fn geodesic(mut self, substeps: usize) -> Result<Self, StepError> {
-        if substeps == 0 || substeps > 1 << 20 {
+        if substeps == 0 || substeps > MAX_SUBSTEPS {
             return Err(StepError::InvalidInput {
                 what: "the drift substeps K of g-BAOAB must be in 1..=2^20",
                 value: substeps as f64,
