@@ -15,6 +15,9 @@ use pyo3::prelude::*;
 use crate::whole::Whole;
 use crate::{refused, typed_error, InvalidInputError};
 
+/// The name of the bonds' family, in errors.
+const FAMILY: &str = "bond";
+
 /// Distance constraints |x_a − x_b| = l between atoms in R³ with masses:
 /// SHAKE's position stage and RATTLE's velocity stage on NumPy arrays of
 /// shape (n, 3), changed in place, solved to a relative tolerance on every
@@ -147,12 +150,14 @@ impl Bonds {
                     "bond {k}: atom indices {ab:?} must be non-negative"
                 )));
             }
-            table.push(&ij, &[l]).map_err(topology)?;
+            table
+                .push(&ij, &[l])
+                .map_err(|e| topology(e.in_family("bond")))?;
         }
         let atoms = masses.len();
         let constraints = pairs.len();
         let system = ParticleSystem::new(3, masses)
-            .and_then(|s| s.with_constraints("bond", Distance::<3>, table))
+            .and_then(|s| s.with_constraints(FAMILY, Distance::<3>, table))
             .map_err(topology)?;
         let options = Options {
             tol: tolerance,

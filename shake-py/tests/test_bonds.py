@@ -119,7 +119,7 @@ def test_bad_numbers_raise_typed_errors_and_change_nothing():
     "args, kwargs, match",
     [
         (([1.0, 1.0], [(0, 2)], [1.0]), {}, "does not exist"),
-        (([1.0, 1.0], [(0, 0)], [1.0]), {}, "appears twice"),
+        (([1.0, 1.0], [(0, 0)], [1.0]), {}, "family `bond`, member 0: particle 0 appears twice"),
         (([1.0, 1.0], [(0, 1), (1, 0)], [1.0, 1.0]), {}, "same constraint"),
         (([1.0, 1.0], [(0, -1)], [1.0]), {}, "non-negative"),
         (([1.0, -1.0], [(0, 1)], [1.0]), {}, "positive"),

@@ -100,3 +100,28 @@ pub enum TopologyError {
         system: usize,
     },
 }
+
+impl TopologyError {
+    /// The error with its family named `name` where it was not yet (an
+    /// error of [`Table::push`](super::Table::push), before the table is
+    /// given to a family).
+    ///
+    /// ```
+    /// use geoshake_runtime::particles::Table;
+    /// let e = Table::new(2, 1).push(&[0, 0], &[1.0]).unwrap_err().in_family("bond");
+    /// assert_eq!(e.to_string(), "family `bond`, member 0: particle 0 appears twice");
+    /// ```
+    pub fn in_family(mut self, name: &str) -> Self {
+        let (TopologyError::RowShape { family, .. }
+        | TopologyError::RepeatedParticle { family, .. }
+        | TopologyError::DanglingParticle { family, .. }
+        | TopologyError::DuplicateMember { family, .. }
+        | TopologyError::BadValue { family, .. }
+        | TopologyError::TooManyConstraints { family, .. }
+        | TopologyError::Dimension { family, .. }) = &mut self;
+        if family.is_empty() {
+            *family = name.to_string();
+        }
+        self
+    }
+}
