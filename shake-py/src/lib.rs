@@ -706,6 +706,14 @@ fn plan(
         options.constraint_tolerance = t;
     }
     if let Some(t) = newton_tolerance {
+        // (Checked here to name the argument as Python knows it; the
+        // runtime's own check names the Rust field.)
+        let most = geoshake::validate::MAX_STEP_TOLERANCE;
+        if !(0.0..=most).contains(&t) {
+            return Err(InvalidInputError::new_err(format!(
+                "invalid `newton_tolerance` = {t:e}: from 0 to {most:e} (Newton stops when an update is below this fraction of the multipliers)"
+            )));
+        }
         options.newton.step_tolerance = t;
     }
     if let Some(n) = max_iterations {

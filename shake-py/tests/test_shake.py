@@ -390,6 +390,15 @@ def test_parameters_must_be_finite_real_numbers(make, says):
     assert says in str(info.value), str(info.value)
 
 
+def test_a_newton_tolerance_is_refused_by_its_python_name():
+    sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
+    z0 = np.array([0.0, -1.0, 0.0, 0.0])
+    for bad in (1.0, -1e-12, float("nan")):
+        with pytest.raises(geoshake.InvalidInputError, match="`newton_tolerance`") as info:
+            geoshake.rattle(sys, z0, 0.01, steps=5, newton_tolerance=bad)
+        assert "step_tolerance" not in str(info.value)
+
+
 def test_iteration_budgets_say_their_range():
     sys = geoshake.models.Pendulum(length=1.0, gravity=9.81)
     z0 = np.array([0.0, -1.0, 0.0, 0.0])
