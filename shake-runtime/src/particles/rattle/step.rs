@@ -93,13 +93,13 @@ impl Rattle {
             // vectorises; then q̃ particle by particle (each particle's
             // h/m_a), with R³'s rows of a fixed length, unrolled.
             if kick {
-                for ((pn, p), f) in pn.iter_mut().zip(&*p).zip(f) {
+                for ((pn, p), f) in pn.iter_mut().zip(p).zip(f) {
                     *pn = p - half * f;
                 }
             } else {
                 pn.copy_from_slice(p);
             }
-            let row = |(((qn, q), pn), &wa): (((&mut [f64], &[f64]), &[f64]), &f64)| {
+            let row = |qn: &mut [f64], q: &[f64], pn: &[f64], wa: f64| {
                 let w = h * wa;
                 for ((qn, q), pt) in qn.iter_mut().zip(q).zip(pn) {
                     *qn = q + w * pt;
@@ -111,8 +111,8 @@ impl Rattle {
                     q.as_chunks::<3>().0,
                     pn.as_chunks::<3>().0,
                 );
-                for (((qn, q), pn), wa) in qn.iter_mut().zip(q).zip(pn).zip(w) {
-                    row((((&mut qn[..], &q[..]), &pn[..]), wa));
+                for (((qn, q), pn), &wa) in qn.iter_mut().zip(q).zip(pn).zip(w) {
+                    row(qn, q, pn, wa);
                 }
             } else {
                 let (qn, q, pn) = (
@@ -120,7 +120,9 @@ impl Rattle {
                     q.chunks_exact(d),
                     pn.chunks_exact(d),
                 );
-                qn.zip(q).zip(pn).zip(w).for_each(row);
+                for (((qn, q), pn), &wa) in qn.zip(q).zip(pn).zip(w) {
+                    row(qn, q, pn, wa);
+                }
             }
         };
         let n = PARALLEL_PARTICLES;
