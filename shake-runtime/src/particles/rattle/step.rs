@@ -89,15 +89,39 @@ impl Rattle {
         // (Each particle's d entries sliced once and zipped: indexed one
         // by one, every access was bounds-checked.)
         let drift = |(((qn, pn), (q, p)), (f, w)): Chunk<'_>| {
-            for (a, &wa) in w.iter().enumerate() {
+            // p̃ first over the whole chunk, one flat loop the compiler
+            // vectorises; then q̃ particle by particle (each particle's
+            // h/m_a), with R³'s rows of a fixed length, unrolled.
+            if kick {
+                for ((pn, p), f) in pn.iter_mut().zip(p).zip(f) {
+                    *pn = p - half * f;
+                }
+            } else {
+                pn.copy_from_slice(p);
+            }
+            let row = |qn: &mut [f64], q: &[f64], pn: &[f64], wa: f64| {
                 let w = h * wa;
-                let r = a * d..(a + 1) * d;
-                let (qn, pn) = (&mut qn[r.clone()], &mut pn[r.clone()]);
-                let (q, p, f) = (&q[r.clone()], &p[r.clone()], &f[r]);
-                for ((qn, pn), ((q, p), f)) in qn.iter_mut().zip(pn).zip(q.iter().zip(p).zip(f)) {
-                    let pt = if kick { p - half * f } else { *p };
-                    *pn = pt;
+                for ((qn, q), pt) in qn.iter_mut().zip(q).zip(pn) {
                     *qn = q + w * pt;
+                }
+            };
+            if d == 3 {
+                let (qn, q, pn) = (
+                    qn.as_chunks_mut::<3>().0,
+                    q.as_chunks::<3>().0,
+                    pn.as_chunks::<3>().0,
+                );
+                for (((qn, q), pn), &wa) in qn.iter_mut().zip(q).zip(pn).zip(w) {
+                    row(qn, q, pn, wa);
+                }
+            } else {
+                let (qn, q, pn) = (
+                    qn.chunks_exact_mut(d),
+                    q.chunks_exact(d),
+                    pn.chunks_exact(d),
+                );
+                for (((qn, q), pn), &wa) in qn.zip(q).zip(pn).zip(w) {
+                    row(qn, q, pn, wa);
                 }
             }
         };

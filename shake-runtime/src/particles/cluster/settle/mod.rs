@@ -104,11 +104,31 @@ fn read(plan: &FamilyClusters, table: &Table, inv_mass: &[f64], c: usize) -> Rea
 fn gather<T: Real>(v: &[f64], base: usize, batch: &[Read]) -> [V3<T>; 3] {
     let mut out = [[T::splat(0.0); 3]; 3];
     for (s, o) in out.iter_mut().enumerate() {
+        // Each lane's particle sliced once: one bounds check for its three
+        // coordinates, not one each. (References, not copies: numbers
+        // copied to the stack and read back as vectors stalled on the
+        // stores.)
+        let mut at = [&[0.0; 3]; LANES];
+        for (a, r) in at.iter_mut().zip(batch) {
+            *a = particle(v, r.parts[s] - base);
+        }
         for (c, o) in o.iter_mut().enumerate() {
-            *o = T::from_fn(|l| v[3 * (batch[l].parts[s] - base) + c]);
+            *o = T::from_fn(|l| at[l][c]);
         }
     }
     out
+}
+
+/// Particle j's coordinates in R³ (one bounds check).
+#[inline(always)]
+fn particle(v: &[f64], j: usize) -> &[f64; 3] {
+    v[3 * j..3 * j + 3].first_chunk().expect("a slice of 3")
+}
+
+/// Particle j's coordinates in R³, to write (one bounds check).
+#[inline(always)]
+fn particle_mut(v: &mut [f64], j: usize) -> &mut [f64; 3] {
+    v[3 * j..3 * j + 3].first_chunk_mut().expect("a slice of 3")
 }
 
 /// The position stage (`shake_fixed`'s contract, the stencil a distance)
@@ -132,14 +152,22 @@ fn shake_batch<S: Stencil, T: Real>(
     debug_assert_eq!(batch.len(), T::N);
     let (x0, xt) = (gather(args.q0, 0, batch), gather(q, w.base, batch));
     let sol = solve(shape, &x0, &xt);
-    let res = residuals(&sol.x1, shape.d2);
+    // The common case first: every lane takes the closed form's answer as
+    // it is, decided by a few comparisons of whole registers (sufficient
+    // conditions for the per-lane judgement below to pass, each lane the
+    // same answer; a NaN fails them and is judged lane by lane). Those on
+    // x̃ first, so that x̃ is not held across the rest (the per-lane path
+    // gathers it again).
+    //
     // x̃ already within the tolerance (or the round-off of its
     // coordinates): Newton takes it as it is, with ν = 0. The closed form
     // would solve exactly for the rounding of x̃ instead, and where a
     // step's displacement is below the resolution of the positions (a box
     // far from the origin) turn that rounding into an impulse of order
     // m·ulp(x)/h on the momenta.
-    let res_t = residuals(&xt, shape.d2);
+    let mut plain = beyond(&xt, shape.d2, args.tol.max(ROUNDOFF_CAP));
+    plain = plain & near_branch(&sol.x1, &xt, shape.min_d2);
+    let res = residuals(&sol.x1, shape.d2);
     // (The momenta gathered after the solve: not held across it.)
     let mut pl = gather(p, w.base, batch);
     let with_p = args.inv_h != 0.0;
@@ -164,15 +192,8 @@ fn shake_batch<S: Stencil, T: Real>(
             projected = Some(project(&sol.x1, wv, &pl));
         }
     }
-    // The common case first: every lane takes the closed form's answer as
-    // it is, decided by a few comparisons of whole registers (sufficient
-    // conditions for the per-lane judgement below to pass, each lane the
-    // same answer; a NaN fails them and is judged lane by lane).
-    let thr = T::splat(args.tol.max(ROUNDOFF_CAP));
     let tol = T::splat(args.tol);
-    let mut plain = thr.lt(res_t[0]) | thr.lt(res_t[1]) | thr.lt(res_t[2]);
-    plain = plain & res[0].le(tol) & res[1].le(tol) & res[2].le(tol);
-    plain = plain & sol.valid() & near_branch(&sol.x1, &xt, shape.min_d2);
+    plain = plain & res[0].le(tol) & res[1].le(tol) & res[2].le(tol) & sol.valid();
     let judged = projected.as_ref().map(Projected::plain);
     if let Some((ok, _)) = judged {
         plain = plain & ok;
@@ -183,12 +204,18 @@ fn shake_batch<S: Stencil, T: Real>(
             w.max_hidden = w.max_hidden.max(worst2.max_lane().sqrt());
         }
         let out = projected.as_ref().map_or(&pl, |pr| &pr.p);
+        let mut a = Answer::empty();
+        a.set(&sol, with_p.then_some(out));
         for (l, r) in batch.iter().enumerate() {
-            write(w, r, l, &sol, with_p.then_some(out), q, p);
+            write(w, r, l, &a, q, p);
         }
         return Ok(());
     }
+    // (x̃ as gathered above: no lane of the batch is written yet.)
+    let xt = gather(q, w.base, batch);
     let (valid, near) = (sol.valid(), near_branch(&sol.x1, &xt, shape.min_d2));
+    let res_t = residuals(&xt, shape.d2);
+    let mut a = Answer::empty();
     for (l, r) in batch.iter().enumerate() {
         let (worst, _) = worst_of(&res, l);
         let met = worst <= args.tol || at_roundoff(&sol.x1, &res, l, args.tol);
@@ -210,7 +237,8 @@ fn shake_batch<S: Stencil, T: Real>(
                 h => {
                     // (q and ν written first, as they were before the
                     // judgement.)
-                    write(w, r, l, &sol, None, q, p);
+                    a.set(&sol, None);
+                    write(w, r, l, &a, q, p);
                     return Err(ClusterFailure {
                         member: r.on[h.map_or(0, |h| h.1)],
                         residual: h.map_or(f64::NAN, |h| h.0),
@@ -221,40 +249,77 @@ fn shake_batch<S: Stencil, T: Real>(
             },
             None => &pl,
         };
-        write(w, r, l, &sol, with_p.then_some(out), q, p);
+        a.set(&sol, with_p.then_some(out));
+        write(w, r, l, &a, q, p);
     }
     Ok(())
 }
 
-/// Lane l's answer written back: x1 to q, ν to the store, and the momenta
-/// `out` (when the step has them) to p.
-#[inline(always)]
-fn write<T: Real>(
-    w: &mut Work<'_>,
-    r: &Read,
-    l: usize,
-    sol: &Solution<T>,
-    out: Option<&[V3<T>; 3]>,
-    q: &mut [f64],
-    p: &mut [f64],
-) {
-    for s in 0..3 {
-        let j = r.parts[s] - w.base;
-        for c in 0..3 {
-            q[3 * j + c] = sol.x1[s][c].lane(l);
+/// A batch's answer in lanes: x1, ν and (when the step has them) the
+/// momenta, each register stored once, so that a lane is read from memory
+/// (a lane taken out of a register by a run-time index went through
+/// memory and blends for every number).
+struct Answer {
+    x1: [[[f64; LANES]; 3]; 3],
+    nu: [[f64; LANES]; 3],
+    /// The momenta, where `has_p` (a flag rather than an `Option`: filling
+    /// an `Option` in place went through a copy of the whole array).
+    p: [[[f64; LANES]; 3]; 3],
+    has_p: bool,
+}
+
+impl Answer {
+    /// An answer to fill ([`Answer::set`]).
+    #[inline(always)]
+    fn empty() -> Answer {
+        Answer {
+            x1: [[[0.0; LANES]; 3]; 3],
+            nu: [[0.0; LANES]; 3],
+            p: [[[0.0; LANES]; 3]; 3],
+            has_p: false,
         }
+    }
+
+    /// The batch's x1, ν, and the momenta `p` where the step has them,
+    /// stored in place (loops over fixed ranges rather than closures: a
+    /// closure is not inlined into the kernel compiled for AVX).
+    #[inline(always)]
+    fn set<T: Real>(&mut self, sol: &Solution<T>, p: Option<&[V3<T>; 3]>) {
+        for s in 0..3 {
+            for c in 0..3 {
+                sol.x1[s][c].store(&mut self.x1[s][c]);
+            }
+            sol.nu[s].store(&mut self.nu[s]);
+        }
+        self.has_p = p.is_some();
+        if let Some(p) = p {
+            for s in 0..3 {
+                for c in 0..3 {
+                    p[s][c].store(&mut self.p[s][c]);
+                }
+            }
+        }
+    }
+}
+
+/// Lane l's answer written back: x1 to q, ν to the store, and the momenta
+/// (when the answer has them) to p.
+#[inline(always)]
+fn write(w: &mut Work<'_>, r: &Read, l: usize, a: &Answer, q: &mut [f64], p: &mut [f64]) {
+    for s in 0..3 {
+        let x = &a.x1[s];
+        *particle_mut(q, r.parts[s] - w.base) = [x[0][l], x[1][l], x[2][l]];
     }
     if let Some(st) = w.store.as_deref_mut() {
         for k in 0..3 {
-            st[r.on[k] - w.mbase] = sol.nu[k].lane(l);
+            st[r.on[k] - w.mbase] = a.nu[k][l];
         }
     }
-    if let Some(out) = out {
+    if a.has_p {
+        let out = &a.p;
         for s in 0..3 {
-            let j = r.parts[s] - w.base;
-            for c in 0..3 {
-                p[3 * j + c] = out[s][c].lane(l);
-            }
+            let v = &out[s];
+            *particle_mut(p, r.parts[s] - w.base) = [v[0][l], v[1][l], v[2][l]];
         }
     }
 }
@@ -325,6 +390,9 @@ fn triangles<S: Stencil, L: Real>(
     // molecule builds it once.
     let mut shape: Option<Shape> = None;
     let mut c = clusters.start;
+    // (Filled in place batch by batch: `[first; LANES]` copied the first
+    // triangle into every lane before the others overwrote it.)
+    let mut batch = None;
     while c < clusters.end {
         let first = read(plan, table, args.inv_mass, c);
         let sh = match &mut shape {
@@ -332,7 +400,8 @@ fn triangles<S: Stencil, L: Real>(
             s => s.insert(Shape::new(first.w, first.d2)),
         };
         if c + LANES <= clusters.end {
-            let mut batch = [first; LANES];
+            let batch = batch.get_or_insert([first; LANES]);
+            batch[0] = first;
             let mut same = true;
             for (l, b) in batch.iter_mut().enumerate().skip(1) {
                 *b = read(plan, table, args.inv_mass, c + l);
@@ -340,7 +409,7 @@ fn triangles<S: Stencil, L: Real>(
             }
             if same {
                 let (st, tb) = (stencil, table);
-                shake_batch::<S, L>(w, &mut f, sh, &batch, st, tb, plan, args, fuse, q, p)?;
+                shake_batch::<S, L>(w, &mut f, sh, batch, st, tb, plan, args, fuse, q, p)?;
                 c += LANES;
                 continue;
             }

@@ -342,6 +342,26 @@ pub(super) fn residuals<T: Real>(x: &[V3<T>; 3], d2: V3) -> V3<T> {
     ]
 }
 
+/// The lanes on which some pair's [`residuals`] at x is certainly above
+/// `thr` (> 0), decided by a product instead of the division: with
+/// a = |l² − d²| and b = 2l² rounded as there, fl(c b) < a for c =
+/// fl(thr (1 + 2⁻⁴⁰)). Then b is finite (c·∞ = ∞ is no smaller), a >
+/// c b (1 − ε) (or a > c b outright where c b is subnormal: a is a number
+/// above fl(c b)), and the residual fl(a / b) ≥ (a / b)(1 − ε) > thr (1 +
+/// 2⁻⁴⁰)(1 − ε)³ > thr. A lane this misses (within 2⁻⁴⁰ of `thr`, NaN) is
+/// left to the per-lane judgement on the residuals themselves.
+#[inline(always)]
+pub(super) fn beyond<T: Real>(x: &[V3<T>; 3], d2: V3, thr: f64) -> T::Mask {
+    #[inline(always)]
+    fn b<T: Real>(a: V3<T>, b: V3<T>, d2: f64, c: T) -> T::Mask {
+        let e = sub(a, b);
+        let l2 = dot(e, e);
+        (c * (T::splat(2.0) * l2)).lt((l2 - T::splat(d2)).abs())
+    }
+    let c = T::splat(thr * (1.0 + 4096.0 * f64::EPSILON));
+    b(x[0], x[1], d2[0], c) | b(x[0], x[2], d2[1], c) | b(x[1], x[2], d2[2], c)
+}
+
 /// The worst of lane l's [`residuals`], and its pair.
 #[inline(always)]
 pub(super) fn worst_of<T: Real>(r: &V3<T>, l: usize) -> (f64, usize) {

@@ -28,6 +28,10 @@ pub(super) trait Real:
     fn from_fn(f: impl FnMut(usize) -> f64) -> Self;
     /// Lane l.
     fn lane(self, l: usize) -> f64;
+    /// Every lane into `out`, lane l at l < N (the others untouched): a
+    /// register stored once, for reading its lanes by a run-time index
+    /// without going through memory per lane.
+    fn store(self, out: &mut [f64; LANES]);
     /// One truth value per lane, so that a batch is judged by a few
     /// comparisons of whole registers rather than lane by lane.
     type Mask: Copy + BitAnd<Output = Self::Mask> + BitOr<Output = Self::Mask>;
@@ -80,6 +84,10 @@ impl Real for f64 {
     #[inline(always)]
     fn lane(self, _: usize) -> f64 {
         self
+    }
+    #[inline(always)]
+    fn store(self, out: &mut [f64; LANES]) {
+        out[0] = self;
     }
     type Mask = bool;
     #[inline(always)]
@@ -208,6 +216,15 @@ impl Real for Lanes {
             sse2!(_mm_cvtsd_f64(v))
         } else {
             sse2!(_mm_cvtsd_f64(_mm_unpackhi_pd(v, v)))
+        }
+    }
+    #[inline(always)]
+    fn store(self, out: &mut [f64; LANES]) {
+        // SAFETY: SSE2 (the x86-64 baseline); each store writes two f64
+        // into `out[0..2]` and `out[2..4]`, in bounds, unaligned stores.
+        unsafe {
+            _mm_storeu_pd(out.as_mut_ptr(), self.0[0]);
+            _mm_storeu_pd(out.as_mut_ptr().add(2), self.0[1]);
         }
     }
     type Mask = LaneMask;
@@ -360,6 +377,12 @@ impl Real for Wide {
             sse2!(_mm_cvtsd_f64(_mm_unpackhi_pd(half, half)))
         }
     }
+    #[inline(always)]
+    fn store(self, out: &mut [f64; LANES]) {
+        // SAFETY: AVX as for every `Wide` (see `avx!`); the store writes
+        // the four f64 of `out`, in bounds, an unaligned store.
+        unsafe { _mm256_storeu_pd(out.as_mut_ptr(), self.0) };
+    }
     type Mask = WideMask;
     #[inline(always)]
     fn lt(self, b: Self) -> WideMask {
@@ -468,6 +491,10 @@ impl Real for Lanes {
     #[inline(always)]
     fn lane(self, l: usize) -> f64 {
         self.0[l]
+    }
+    #[inline(always)]
+    fn store(self, out: &mut [f64; LANES]) {
+        *out = self.0;
     }
     type Mask = LaneMask;
     #[inline(always)]

@@ -288,6 +288,9 @@ fn compare_as_f64<L: Real>() {
                 assert_eq!(L::holds(lt & le, l), x < y);
                 assert_eq!(L::holds(fin, l), x.is_finite());
                 assert_eq!(a.lane(l).to_bits(), x.to_bits());
+                let mut stored = [0.0; LANES];
+                a.store(&mut stored);
+                assert_eq!(stored[l].to_bits(), x.to_bits());
                 assert_eq!(a.abs().lane(l).to_bits(), x.abs().to_bits());
                 assert_eq!((-a).lane(l).to_bits(), (-x).to_bits());
                 if !x.is_nan() && !y.is_nan() {
@@ -298,4 +301,67 @@ fn compare_as_f64<L: Real>() {
             assert_eq!(L::all(le), all);
         }
     }
+}
+
+/// [`beyond`] passes a lane only where some [`residuals`] is above the
+/// threshold, so that the batch's fast path decides x̃ as the per-lane
+/// judgement does: triangles whose residuals lie within ±10⁻⁹ (relative)
+/// of the threshold, at scales from 10⁻¹⁶⁰ (products below f64's normal
+/// range) to 10¹⁵⁴ (2|e|² overflows), and NaN; and it misses no lane whose
+/// residual is clearly (2⁻³⁰ relative) above it.
+#[test]
+fn beyond_passes_only_residuals_above_the_threshold() {
+    beyond_as_residuals::<f64>();
+    beyond_as_residuals::<Lanes>();
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        beyond_as_residuals::<Wide>();
+    }
+}
+
+fn beyond_as_residuals<L: Real>() {
+    let mut rng = Rng(11);
+    let (mut passed, mut below) = (0, 0);
+    for trial in 0..20_000 {
+        let thr = if trial % 2 == 0 { 1e-12 } else { ROUNDOFF_CAP };
+        let scale = 10f64.powf(-160.0 + 314.0 * (0.5 + 0.5 * rng.next()));
+        let x: Vec<[V3; 3]> = (0..L::N)
+            .map(|_| [rng.v3(scale), rng.v3(scale), rng.v3(scale)])
+            .collect();
+        // d² = l² (1 − 2 thr (1 + δ)) on each pair of the first lane: the
+        // residual is thr (1 + δ) up to rounding; NaN now and then.
+        let mut d2 = [0.0; 3];
+        for (k, &(i, j)) in PAIRS.iter().enumerate() {
+            let e = sub(x[0][i], x[0][j]);
+            let delta = 1e-9 * rng.next();
+            d2[k] = dot(e, e) * (1.0 - 2.0 * thr * (1.0 + delta));
+        }
+        if trial % 97 == 0 {
+            d2[1] = f64::NAN;
+        }
+        let xl = [0, 1, 2].map(|s| [0, 1, 2].map(|c| L::from_fn(|l| x[l][s][c])));
+        let (fast, res) = (beyond(&xl, d2, thr), residuals(&xl, d2));
+        for l in 0..L::N {
+            let worst = (0..3).map(|k| res[k].lane(l)).fold(0.0, f64::max);
+            if L::holds(fast, l) {
+                passed += 1;
+                assert!(worst > thr, "{worst:e} passed at {thr:e}");
+            } else if worst > thr * (1.0 + 2f64.powi(-30)) && worst.is_finite() {
+                // Only where 2|e|² overflows, or thr·2|e|² is below the
+                // normal range (its rounding then coarser than 2⁻⁴⁰), may a
+                // clear residual be missed.
+                let edge = (0..3).any(|k| {
+                    let (i, j) = PAIRS[k];
+                    let e = sub(x[l][i], x[l][j]);
+                    let b = 2.0 * dot(e, e);
+                    !b.is_finite() || thr * b < f64::MIN_POSITIVE
+                });
+                assert!(edge, "{worst:e} missed at {thr:e}");
+            } else if worst <= thr {
+                below += 1;
+            }
+        }
+    }
+    // Both sides of the threshold were met.
+    assert!(passed > 1000 && below > 1000, "{passed} {below}");
 }
