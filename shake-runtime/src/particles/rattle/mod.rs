@@ -313,13 +313,13 @@ impl Rattle {
 /// The chunk of the passes over every particle that run on threads:
 /// particles per chunk of the drift, entries (particles × D) per chunk of
 /// the closing kick and the finiteness checks.
-const PARALLEL_PARTICLES: usize = 8192;
+pub(super) const PARALLEL_PARTICLES: usize = 8192;
 
 /// True when a pass over `n` items (particles or entries, as the pass
 /// counts them) is worth handing to threads: more than one chunk of
 /// [`PARALLEL_PARTICLES`], and more than one thread.
 /// Each entry is computed as on one thread, so the numbers do not depend
 /// on the number of threads.
-fn parallel(n: usize) -> bool {
+pub(super) fn parallel(n: usize) -> bool {
     n > PARALLEL_PARTICLES && rayon::current_num_threads() > 1
 }
