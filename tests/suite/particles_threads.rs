@@ -63,20 +63,26 @@ fn same_steps_on_any_number_of_threads(potential: bool, general: bool) {
     assert!(one.error.is_none(), "{:?}", one.error);
     for threads in [2, 3] {
         let (many, _) = run_on(threads, potential, general, 20);
-        assert!(many.error.is_none(), "{:?}", many.error);
-        assert_same_bits(&one.trajectory, &many.trajectory);
-        let (a, b) = (&one.summary, &many.summary);
-        assert_eq!(a.newton_iterations, b.newton_iterations);
-        assert_eq!(a.max_newton_iterations, b.max_newton_iterations);
-        assert_eq!(
-            a.max_residual.map(f64::to_bits),
-            b.max_residual.map(f64::to_bits)
-        );
-        assert_eq!(
-            a.max_hidden.map(f64::to_bits),
-            b.max_hidden.map(f64::to_bits)
-        );
+        assert_same_run(&one, &many);
     }
+}
+
+/// Two runs that took the same steps: the same states and reports, bit
+/// for bit.
+fn assert_same_run(one: &RunOutcome, many: &RunOutcome) {
+    assert!(many.error.is_none(), "{:?}", many.error);
+    assert_same_bits(&one.trajectory, &many.trajectory);
+    let (a, b) = (&one.summary, &many.summary);
+    assert_eq!(a.newton_iterations, b.newton_iterations);
+    assert_eq!(a.max_newton_iterations, b.max_newton_iterations);
+    assert_eq!(
+        a.max_residual.map(f64::to_bits),
+        b.max_residual.map(f64::to_bits)
+    );
+    assert_eq!(
+        a.max_hidden.map(f64::to_bits),
+        b.max_hidden.map(f64::to_bits)
+    );
 }
 
 #[test]
@@ -154,18 +160,6 @@ fn a_long_chain_takes_the_same_steps_on_one_two_and_three_threads() {
     let one = chain_on(1, 4);
     assert!(one.error.is_none(), "{:?}", one.error);
     for threads in [2, 3] {
-        let many = chain_on(threads, 4);
-        assert!(many.error.is_none(), "{:?}", many.error);
-        assert_same_bits(&one.trajectory, &many.trajectory);
-        let (a, b) = (&one.summary, &many.summary);
-        assert_eq!(a.newton_iterations, b.newton_iterations);
-        assert_eq!(
-            a.max_residual.map(f64::to_bits),
-            b.max_residual.map(f64::to_bits)
-        );
-        assert_eq!(
-            a.max_hidden.map(f64::to_bits),
-            b.max_hidden.map(f64::to_bits)
-        );
+        assert_same_run(&one, &chain_on(threads, 4));
     }
 }

@@ -18,8 +18,7 @@
 //! depends on m and the bandwidth only.
 
 use super::graph::{self, Numbering};
-use super::plan::ClusterArgs;
-use super::rattle::{parallel, PARALLEL_PARTICLES};
+use super::plan::{parallel, ClusterArgs, PARALLEL_PARTICLES};
 use super::ParticleSystem;
 use crate::error::{SolveError, Stage, StepError};
 use crate::newton::{Rate, Residuals};
@@ -206,13 +205,14 @@ impl Global {
         let (pos, ga, gb, part) = (&self.pos, &self.ga, &self.gb, &self.part);
         // The terms e of a range of entries, added in their order.
         let add = |v: &mut [f64], first: usize, terms: std::ops::Range<usize>| {
-            for e in terms {
-                let (a, b) = (ga[e] as usize, gb[e] as usize);
+            let (ga, gb, part) = (&ga[terms.clone()], &gb[terms.clone()], &part[terms.clone()]);
+            for (((&p, &a), &b), &i) in pos[terms].iter().zip(ga).zip(gb).zip(part) {
+                let (a, b) = (a as usize, b as usize);
                 let mut dot = 0.0;
                 for c in 0..d {
                     dot += grad[a + c] * grad[b + c];
                 }
-                v[pos[e] as usize - first] += inv_m[part[e] as usize] * dot;
+                v[p as usize - first] += inv_m[i as usize] * dot;
             }
         };
         let v = self.solver.values_mut();
@@ -356,16 +356,8 @@ impl Global {
             let worst = if parallel(self.g.len()) {
                 let n = PARALLEL_PARTICLES;
                 let g = self.g.par_chunks(n).zip(self.scale0.par_chunks(n));
-                g.map(|(g, s)| largest_relative(g, s)).reduce(
-                    || 0.0,
-                    |a, b| {
-                        if a.is_nan() || b.is_nan() {
-                            f64::NAN
-                        } else {
-                            a.max(b)
-                        }
-                    },
-                )
+                g.map(|(g, s)| largest_relative(g, s))
+                    .reduce(|| 0.0, larger_or_nan)
             } else {
                 largest_relative(&self.g, &self.scale0)
             };
@@ -650,6 +642,16 @@ fn largest_relative(g: &[f64], scale: &[f64]) -> f64 {
         f64::NAN
     } else {
         worst
+    }
+}
+
+/// The larger of two [`largest_relative`]s of parts, NaN if either is:
+/// the whole's, in any order.
+fn larger_or_nan(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
     }
 }
 

@@ -301,6 +301,8 @@ fn solve_rows(v: &[f64], inv: &[f64], b: usize, x: &mut [f64]) {
     if n == 0 {
         return;
     }
+    // Slices of length n: the loops below index without bounds checks.
+    let (v, inv) = (&v[..n * (b + 1)], &inv[..n]);
     if b == 1 {
         // Tridiagonal (a chain): row i stores (L_{i,i-1}, L_ii).
         let v = &v[..2 * n];
