@@ -63,20 +63,26 @@ fn same_steps_on_any_number_of_threads(potential: bool, general: bool) {
     assert!(one.error.is_none(), "{:?}", one.error);
     for threads in [2, 3] {
         let (many, _) = run_on(threads, potential, general, 20);
-        assert!(many.error.is_none(), "{:?}", many.error);
-        assert_same_bits(&one.trajectory, &many.trajectory);
-        let (a, b) = (&one.summary, &many.summary);
-        assert_eq!(a.newton_iterations, b.newton_iterations);
-        assert_eq!(a.max_newton_iterations, b.max_newton_iterations);
-        assert_eq!(
-            a.max_residual.map(f64::to_bits),
-            b.max_residual.map(f64::to_bits)
-        );
-        assert_eq!(
-            a.max_hidden.map(f64::to_bits),
-            b.max_hidden.map(f64::to_bits)
-        );
+        assert_same_run(&one, &many);
     }
+}
+
+/// Two runs that took the same steps: the same states and reports, bit
+/// for bit.
+fn assert_same_run(one: &RunOutcome, many: &RunOutcome) {
+    assert!(many.error.is_none(), "{:?}", many.error);
+    assert_same_bits(&one.trajectory, &many.trajectory);
+    let (a, b) = (&one.summary, &many.summary);
+    assert_eq!(a.newton_iterations, b.newton_iterations);
+    assert_eq!(a.max_newton_iterations, b.max_newton_iterations);
+    assert_eq!(
+        a.max_residual.map(f64::to_bits),
+        b.max_residual.map(f64::to_bits)
+    );
+    assert_eq!(
+        a.max_hidden.map(f64::to_bits),
+        b.max_hidden.map(f64::to_bits)
+    );
 }
 
 #[test]
@@ -123,5 +129,37 @@ fn a_failure_is_reported_at_the_same_member_on_any_number_of_threads() {
     }
     for threads in [2, 3] {
         assert_eq!(fail(threads).to_string(), one.to_string());
+    }
+}
+
+/// 10⁵ links: above the band solver's partition (2¹⁶ rows) and many
+/// chunks of the coupled path's passes (8192 members or particles).
+const LINKS: usize = 100_000;
+
+/// The chain run of `steps` steps in a pool of `threads`.
+fn chain_on(threads: usize, steps: u64) -> RunOutcome {
+    let pool = ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let (system, mut state) = generate::chain(LINKS, 11).unwrap();
+        let mut r = Rattle::new(system, 2.0, Options::default()).unwrap();
+        assert_eq!(r.solver_name(), "band");
+        r.project(&mut state).unwrap();
+        generate::set_temperature(r.system(), &mut state, 300.0);
+        r.run(&state, Stop::Steps(steps)).execute()
+    })
+}
+
+/// The coupled path (a long chain: its passes over the members and the
+/// particles, the assembly of N and the partitioned band Cholesky) takes
+/// the same steps, bit for bit, on one, two and three threads.
+#[test]
+fn a_long_chain_takes_the_same_steps_on_one_two_and_three_threads() {
+    let one = chain_on(1, 4);
+    assert!(one.error.is_none(), "{:?}", one.error);
+    for threads in [2, 3] {
+        assert_same_run(&one, &chain_on(threads, 4));
     }
 }

@@ -28,6 +28,24 @@ pub trait ConstraintFamily: ClusterKernel + Send + Sync {
     /// kernels' own): the relative residual of member k is
     /// |g_k| · inv_scale_k.
     fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], inv_scale: &mut [f64]);
+    /// As [`values`](Self::values) for the members `first..first +
+    /// g.len()` only (a chunk of a pass on threads: each member's number
+    /// is the one the whole pass computes).
+    #[doc(hidden)]
+    fn values_from(&self, q: &[f64], first: usize, g: &mut [f64]);
+    /// As [`gradients`](Self::gradients) (with `inv_scale`,
+    /// [`gradients_scaled`](Self::gradients_scaled)) for the members
+    /// `first..first + g.len()` only, their blocks from the start of
+    /// `grad`.
+    #[doc(hidden)]
+    fn gradients_from(
+        &self,
+        q: &[f64],
+        first: usize,
+        g: &mut [f64],
+        grad: &mut [f64],
+        inv_scale: Option<&mut [f64]>,
+    );
     /// out ← out − factor · W^w Gᵀ x over this family's members: every
     /// member k's gradient block (in `grad`, the layout of
     /// [`gradients`](Self::gradients)) times x_k, scaled by the particle's
@@ -83,6 +101,20 @@ pub trait ConstraintFamily: ClusterKernel + Send + Sync {
         grad: &[f64],
         inv_mass: &[f64],
         p: &[f64],
+        out: &mut [f64],
+        before: &mut [f64],
+        ratio: bool,
+    ) -> f64;
+    /// As [`hidden`](Self::hidden) for the members `first..first +
+    /// out.len()` only, their gradient blocks from the start of `grad`.
+    #[doc(hidden)]
+    #[allow(clippy::too_many_arguments)]
+    fn hidden_from(
+        &self,
+        grad: &[f64],
+        inv_mass: &[f64],
+        p: &[f64],
+        first: usize,
         out: &mut [f64],
         before: &mut [f64],
         ratio: bool,
@@ -233,33 +265,43 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         &self.table
     }
     fn values(&self, q: &[f64], g: &mut [f64]) {
+        self.values_from(q, 0, g);
+    }
+    fn values_from(&self, q: &[f64], first: usize, g: &mut [f64]) {
         let mut x = [0.0; MAX_LOCAL];
         let x = &mut x[..S::ARITY * S::DIM];
-        for (k, gk) in g.iter_mut().enumerate().take(self.table.len()) {
+        let members = self.table.len().saturating_sub(first);
+        for (k, gk) in (first..).zip(g.iter_mut().take(members)) {
             self.gather(q, k, x);
             *gk = self.stencil.value(x, self.table.data(k));
         }
     }
     fn gradients(&self, q: &[f64], g: &mut [f64], grad: &mut [f64]) {
-        let w = S::ARITY * S::DIM;
-        let mut x = [0.0; MAX_LOCAL];
-        let x = &mut x[..w];
-        for k in 0..self.table.len() {
-            self.gather(q, k, x);
-            g[k] = self
-                .stencil
-                .gradient(x, self.table.data(k), &mut grad[k * w..(k + 1) * w]);
-        }
+        self.gradients_from(q, 0, &mut g[..self.table.len()], grad, None);
     }
     fn gradients_scaled(&self, q: &[f64], g: &mut [f64], grad: &mut [f64], inv_scale: &mut [f64]) {
+        let g = &mut g[..self.table.len()];
+        self.gradients_from(q, 0, g, grad, Some(inv_scale));
+    }
+    fn gradients_from(
+        &self,
+        q: &[f64],
+        first: usize,
+        g: &mut [f64],
+        grad: &mut [f64],
+        mut inv_scale: Option<&mut [f64]>,
+    ) {
         let w = S::ARITY * S::DIM;
         let mut x = [0.0; MAX_LOCAL];
         let x = &mut x[..w];
-        for k in 0..self.table.len() {
+        for (l, gl) in g.iter_mut().enumerate() {
+            let k = first + l;
             self.gather(q, k, x);
-            let gr = &mut grad[k * w..(k + 1) * w];
-            g[k] = self.stencil.gradient(x, self.table.data(k), gr);
-            inv_scale[k] = member_scale::<S>(gr, x).0;
+            let gr = &mut grad[l * w..(l + 1) * w];
+            *gl = self.stencil.gradient(x, self.table.data(k), gr);
+            if let Some(s) = inv_scale.as_deref_mut() {
+                s[l] = member_scale::<S>(gr, x).0;
+            }
         }
     }
     fn scatter(
@@ -318,12 +360,26 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
         before: &mut [f64],
         ratio: bool,
     ) -> f64 {
+        let out = &mut out[..self.table.len()];
+        self.hidden_from(grad, inv_mass, p, 0, out, before, ratio)
+    }
+    fn hidden_from(
+        &self,
+        grad: &[f64],
+        inv_mass: &[f64],
+        p: &[f64],
+        first: usize,
+        out: &mut [f64],
+        before: &mut [f64],
+        ratio: bool,
+    ) -> f64 {
         let (d, ar) = (S::DIM, S::ARITY);
         let w = ar * d;
         let idx = self.table.all_particles();
         let mut worst = 0.0f64;
-        for k in 0..self.table.len() {
-            let gk = &grad[k * w..(k + 1) * w];
+        for l in 0..out.len() {
+            let k = first + l;
+            let gk = &grad[l * w..(l + 1) * w];
             let ik = &idx[k * ar..(k + 1) * ar];
             // The velocities v = M⁻¹p of the member's particles are formed
             // on the fly: a local copy of them (zeroed per member) cost as
@@ -338,7 +394,7 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
                     vv += v * v;
                 }
             }
-            out[k] = s;
+            out[l] = s;
             if ratio {
                 use crate::tolerance::{relative_dot_from_sums, HIDDEN_LIMIT};
                 let rel = |b0_sq: f64| {
@@ -347,13 +403,13 @@ impl<S: Stencil> ConstraintFamily for Family<S> {
                 };
                 let mut r = rel(0.0);
                 if !(r <= HIDDEN_LIMIT) {
-                    r = rel(before[k]);
+                    r = rel(before[l]);
                 }
                 if crate::tolerance::worse(r, worst) {
                     worst = r;
                 }
             } else {
-                before[k] = vv;
+                before[l] = vv;
             }
         }
         worst

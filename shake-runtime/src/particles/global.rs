@@ -2,15 +2,30 @@
 //! graphs): one simplified Newton over every constraint, with the factor of
 //! N(q0) = G(q0) M⁻¹ G(q0)ᵀ assembled from the stencils' gradients and
 //! factorised by the banded or sparse [`SpdSolver`].
+//!
+//! On systems of more than one chunk ([`PARALLEL_PARTICLES`]) of members,
+//! particles or entries of N, every pass goes to threads in chunks of that
+//! fixed size, and each number is computed by the operations, in the
+//! order, of the serial pass: the member passes (values, gradients,
+//! hidden constraints) write disjoint members; the maxima are exact in any
+//! order; the assembly of N sums each entry's terms in one place (its
+//! terms sorted by entry, in their serial order); the scatters
+//! out ← out − W Gᵀ x are gathers, each particle subtracting the terms of
+//! the constraints touching it in ascending order, the order in which the
+//! serial scatter over the members reaches it. So the bits do not depend
+//! on the number of threads, and are the serial pass's; the band solver's
+//! partition for large m ([`BandCholesky`](crate::solver::BandCholesky))
+//! depends on m and the bandwidth only.
 
 use super::graph::{self, Numbering};
-use super::plan::ClusterArgs;
+use super::plan::{parallel, ClusterArgs, PARALLEL_PARTICLES};
 use super::ParticleSystem;
 use crate::error::{SolveError, Stage, StepError};
 use crate::newton::{Rate, Residuals};
 use crate::report::StepInfo;
 use crate::solver::SpdSolver;
 use crate::tolerance::roundoff_floor;
+use rayon::prelude::*;
 
 /// The coupled path (chains, general graphs): one simplified Newton over
 /// every constraint with the factor of N(q0).
@@ -19,11 +34,20 @@ pub(super) struct Global {
     pub(super) solver: SpdSolver,
     /// Assembly of N from gradients: entry `pos[e]` gains
     /// `W_{part[e]}` ∇_a g_x · ∇_a g_y with the two gradient blocks at
-    /// `ga[e]`, `gb[e]`.
+    /// `ga[e]`, `gb[e]`. Sorted by `pos` (stably: each entry's terms in
+    /// the order of the particles), so that a chunk of entries owns a
+    /// range of terms.
     pub(super) pos: Vec<u32>,
     pub(super) ga: Vec<u32>,
     pub(super) gb: Vec<u32>,
     pub(super) part: Vec<u32>,
+    /// For every particle i, `touch_start[i]..touch_start[i + 1]` into
+    /// `touch_c` (the constraints touching i, ascending) and `touch_g`
+    /// (where i's block of that constraint's gradient starts): the
+    /// scatters as gathers.
+    pub(super) touch_start: Vec<u32>,
+    pub(super) touch_c: Vec<u32>,
+    pub(super) touch_g: Vec<u32>,
     pub(super) grad0: Vec<f64>,
     pub(super) grad1: Vec<f64>,
     /// 1 / (|∇g| · extent) of every member at q0 and at q1
@@ -74,6 +98,18 @@ impl Global {
                 }
             }
         }
+        // Stable: an entry's terms keep their order (that of the particles).
+        let mut order: Vec<u32> = (0..pos.len() as u32).collect();
+        order.sort_by_key(|&e| pos[e as usize]);
+        let permute = |v: &[u32]| -> Vec<u32> { order.iter().map(|&e| v[e as usize]).collect() };
+        let (pos, ga, gb, part) = (permute(&pos), permute(&ga), permute(&gb), permute(&part));
+        let touch_start = comps.touch_start.iter().map(|&t| t as u32).collect();
+        let touch_c = comps.touch.clone();
+        let mut touch_g = Vec::with_capacity(touch_c.len());
+        for i in 0..system.particles() {
+            let cs = &comps.touch[comps.touch_start[i]..comps.touch_start[i + 1]];
+            touch_g.extend(cs.iter().map(|&c| block(c as usize, i as u32)));
+        }
         let ng = *num.grad_offsets.last().unwrap();
         Global {
             solver,
@@ -81,6 +117,9 @@ impl Global {
             ga,
             gb,
             part,
+            touch_start,
+            touch_c,
+            touch_g,
             grad0: vec![0.0; ng],
             grad1: vec![0.0; ng],
             scale0: vec![0.0; m],
@@ -98,7 +137,10 @@ impl Global {
             + 4 * (self.pos.capacity()
                 + self.ga.capacity()
                 + self.gb.capacity()
-                + self.part.capacity())
+                + self.part.capacity()
+                + self.touch_start.capacity()
+                + self.touch_c.capacity()
+                + self.touch_g.capacity())
             + 8 * (self.grad0.capacity()
                 + self.grad1.capacity()
                 + self.scale0.capacity()
@@ -121,7 +163,34 @@ impl Global {
         for (f, fam) in system.constraint_families().iter().enumerate() {
             let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
             let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
-            fam.gradients_scaled(q, &mut g[c0..c1], &mut grad[g0..g1], &mut scale[c0..c1]);
+            let (g, grad, scale) = (&mut g[c0..c1], &mut grad[g0..g1], &mut scale[c0..c1]);
+            if parallel(c1 - c0) {
+                let (n, w) = (PARALLEL_PARTICLES, fam.table().arity() * system.dim());
+                g.par_chunks_mut(n)
+                    .zip(grad.par_chunks_mut(n * w))
+                    .zip(scale.par_chunks_mut(n))
+                    .enumerate()
+                    .for_each(|(j, ((g, grad), s))| {
+                        fam.gradients_from(q, j * n, g, grad, Some(s));
+                    });
+            } else {
+                fam.gradients_scaled(q, g, grad, scale);
+            }
+        }
+    }
+
+    /// g(q) into `g`, every family.
+    fn values(system: &ParticleSystem, num: &Numbering, q: &[f64], g: &mut [f64]) {
+        for (f, fam) in system.constraint_families().iter().enumerate() {
+            let g = &mut g[num.offsets[f]..num.offsets[f + 1]];
+            if parallel(g.len()) {
+                let n = PARALLEL_PARTICLES;
+                g.par_chunks_mut(n)
+                    .enumerate()
+                    .for_each(|(j, g)| fam.values_from(q, j * n, g));
+            } else {
+                fam.values(q, g);
+            }
         }
     }
 
@@ -132,22 +201,40 @@ impl Global {
         inv_m: &[f64],
         which: u8,
     ) -> Result<(), usize> {
-        self.solver.clear();
         let grad = if which == 0 { &self.grad0 } else { &self.grad1 };
-        let v = self.solver.values_mut();
-        for e in 0..self.pos.len() {
-            let (a, b) = (self.ga[e] as usize, self.gb[e] as usize);
-            let mut dot = 0.0;
-            for c in 0..d {
-                dot += grad[a + c] * grad[b + c];
+        let (pos, ga, gb, part) = (&self.pos, &self.ga, &self.gb, &self.part);
+        // The terms e of a range of entries, added in their order.
+        let add = |v: &mut [f64], first: usize, terms: std::ops::Range<usize>| {
+            let (ga, gb, part) = (&ga[terms.clone()], &gb[terms.clone()], &part[terms.clone()]);
+            for (((&p, &a), &b), &i) in pos[terms].iter().zip(ga).zip(gb).zip(part) {
+                let (a, b) = (a as usize, b as usize);
+                let mut dot = 0.0;
+                for c in 0..d {
+                    dot += grad[a + c] * grad[b + c];
+                }
+                v[p as usize - first] += inv_m[i as usize] * dot;
             }
-            v[self.pos[e] as usize] += inv_m[self.part[e] as usize] * dot;
+        };
+        let v = self.solver.values_mut();
+        if parallel(v.len()) {
+            let n = PARALLEL_PARTICLES;
+            v.par_chunks_mut(n).enumerate().for_each(|(j, v)| {
+                let at = |p: usize| pos.partition_point(|&q| (q as usize) < p);
+                v.fill(0.0);
+                add(v, j * n, at(j * n)..at(j * n + v.len()));
+            });
+        } else {
+            v.fill(0.0);
+            add(v, 0, 0..pos.len());
         }
         self.solver.factor()
     }
 
-    /// out ← out − factor · W^w Gᵀ x, family by family (monomorphic loops).
+    /// out ← out − factor · W^w Gᵀ x, family by family (monomorphic loops),
+    /// or on threads particle by particle ([`gather`](Self::gather)).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn scatter(
+        &self,
         system: &ParticleSystem,
         num: &Numbering,
         grad: &[f64],
@@ -157,11 +244,47 @@ impl Global {
         factor: f64,
     ) {
         let inv_m = system.inverse_masses();
+        if parallel(inv_m.len()) {
+            self.gather(system.dim(), inv_m, grad, x, weighted, out, factor);
+            return;
+        }
         for (f, fam) in system.constraint_families().iter().enumerate() {
             let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
             let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
             fam.scatter(&grad[g0..g1], &x[c0..c1], inv_m, weighted, factor, out);
         }
+    }
+
+    /// out ← out − factor · W^w Gᵀ x on threads, in chunks of particles:
+    /// particle i's entries lose the terms x_c ∇_i g_c of the constraints
+    /// c touching it in ascending order, the order of the serial scatter
+    /// (the same products, subtracted in the same order: the same bits).
+    #[allow(clippy::too_many_arguments)]
+    fn gather(
+        &self,
+        d: usize,
+        inv_m: &[f64],
+        grad: &[f64],
+        x: &[f64],
+        weighted: bool,
+        out: &mut [f64],
+        factor: f64,
+    ) {
+        let n = PARALLEL_PARTICLES;
+        let (start, tc, tg) = (&self.touch_start, &self.touch_c, &self.touch_g);
+        out.par_chunks_mut(n * d).enumerate().for_each(|(j, out)| {
+            for (l, o) in out.chunks_exact_mut(d).enumerate() {
+                let i = j * n + l;
+                for t in start[i] as usize..start[i + 1] as usize {
+                    let xk = x[tc[t] as usize] * factor;
+                    let s = if weighted { xk * inv_m[i] } else { xk };
+                    let gk = &grad[tg[t] as usize..tg[t] as usize + d];
+                    for (o, g) in o.iter_mut().zip(gk) {
+                        *o -= s * g;
+                    }
+                }
+            }
+        });
     }
 
     pub(super) fn singular(
@@ -222,18 +345,22 @@ impl Global {
         }
         if reuse && args.inv_h != 0.0 {
             // Warm start along a trajectory: the previous step's ν.
-            Self::scatter(system, num, &self.grad0, &self.nu, true, qn, 1.0);
+            self.scatter(system, num, &self.grad0, &self.nu, true, qn, 1.0);
         } else {
             self.nu.fill(0.0);
         }
         let mut it = 0;
         let mut rate = Residuals::new(args.max_iter);
         loop {
-            for (f, fam) in system.constraint_families().iter().enumerate() {
-                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
-                fam.values(qn, &mut self.g[c0..c1]);
-            }
-            let worst = largest_relative(&self.g, &self.scale0);
+            Self::values(system, num, qn, &mut self.g);
+            let worst = if parallel(self.g.len()) {
+                let n = PARALLEL_PARTICLES;
+                let g = self.g.par_chunks(n).zip(self.scale0.par_chunks(n));
+                g.map(|(g, s)| largest_relative(g, s))
+                    .reduce(|| 0.0, larger_or_nan)
+            } else {
+                largest_relative(&self.g, &self.scale0)
+            };
             if worst <= args.tol {
                 report.residual = Some(worst);
                 report.shake_iterations = it;
@@ -278,16 +405,34 @@ impl Global {
             for (n, dl) in self.nu.iter_mut().zip(&self.delta) {
                 *n += dl;
             }
-            // G(q0) recomputed, not streamed from grad0 (see scatter_at).
+            // G(q0) recomputed, not streamed from grad0 (see scatter_at);
+            // on threads into grad1 (free until the velocity stage), with
+            // g (re-evaluated next iteration) for the values, then
+            // gathered.
             let inv_m = system.inverse_masses();
-            for (f, fam) in system.constraint_families().iter().enumerate() {
-                let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
-                fam.scatter_at(args.q0, &self.delta[c0..c1], inv_m, true, 1.0, qn);
+            if parallel(inv_m.len()) {
+                for (f, fam) in system.constraint_families().iter().enumerate() {
+                    let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                    let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
+                    let (n, w) = (PARALLEL_PARTICLES, fam.table().arity() * d);
+                    let g = self.g[c0..c1].par_chunks_mut(n);
+                    g.zip(self.grad1[g0..g1].par_chunks_mut(n * w))
+                        .enumerate()
+                        .for_each(|(j, (g, grad))| {
+                            fam.gradients_from(args.q0, j * n, g, grad, None);
+                        });
+                }
+                self.gather(d, inv_m, &self.grad1, &self.delta, true, qn, 1.0);
+            } else {
+                for (f, fam) in system.constraint_families().iter().enumerate() {
+                    let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
+                    fam.scatter_at(args.q0, &self.delta[c0..c1], inv_m, true, 1.0, qn);
+                }
             }
             it += 1;
         }
         if args.inv_h != 0.0 {
-            Self::scatter(system, num, &self.grad0, &self.nu, false, pn, args.inv_h);
+            self.scatter(system, num, &self.grad0, &self.nu, false, pn, args.inv_h);
         }
         Ok(())
     }
@@ -318,7 +463,7 @@ impl Global {
             .map_err(|p| Self::singular(system, num, p, Stage::Rattle, 0, k, time))?;
         self.hidden(system, num, pn, false);
         self.solver.solve(&mut self.delta);
-        Self::scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
+        self.scatter(system, num, &self.grad1, &self.delta, false, pn, 1.0);
         // The position stage's result judged at its own scale (its test
         // used q0's, which from far off M is the far point's): g(q1) and
         // the scales at q1 are in hand from the gradients above.
@@ -452,14 +597,24 @@ impl Global {
         for (f, fam) in system.constraint_families().iter().enumerate() {
             let (c0, c1) = (num.offsets[f], num.offsets[f + 1]);
             let (g0, g1) = (num.grad_offsets[f], num.grad_offsets[f + 1]);
-            let w = fam.hidden(
-                &self.grad1[g0..g1],
-                inv_m,
-                p,
-                &mut self.delta[c0..c1],
-                &mut self.before[c0..c1],
-                ratio,
-            );
+            let (grad, out) = (&self.grad1[g0..g1], &mut self.delta[c0..c1]);
+            let before = &mut self.before[c0..c1];
+            let w = if parallel(c1 - c0) {
+                let (n, wd) = (PARALLEL_PARTICLES, fam.table().arity() * system.dim());
+                let chunks = grad.par_chunks(n * wd).zip(out.par_chunks_mut(n));
+                chunks
+                    .zip(before.par_chunks_mut(n))
+                    .enumerate()
+                    .map(|(j, ((grad, out), before))| {
+                        fam.hidden_from(grad, inv_m, p, j * n, out, before, ratio)
+                    })
+                    .reduce(
+                        || 0.0,
+                        |a, b| if crate::tolerance::worse(b, a) { b } else { a },
+                    )
+            } else {
+                fam.hidden(grad, inv_m, p, out, before, ratio)
+            };
             // (`f64::max` would drop a NaN: a non-finite residual must fail.)
             if crate::tolerance::worse(w, worst) {
                 worst = w;
@@ -487,6 +642,16 @@ fn largest_relative(g: &[f64], scale: &[f64]) -> f64 {
         f64::NAN
     } else {
         worst
+    }
+}
+
+/// The larger of two [`largest_relative`]s of parts, NaN if either is:
+/// the whole's, in any order.
+fn larger_or_nan(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
     }
 }
 

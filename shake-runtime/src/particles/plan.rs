@@ -213,6 +213,22 @@ pub(crate) enum FailureKind {
     NotFinite,
 }
 
+/// The chunk of the passes over every particle that run on threads:
+/// particles per chunk of the drift and of the coupled path's scatters,
+/// entries (particles × D) per chunk of the closing kick and the
+/// finiteness checks, members per chunk of the coupled path's member
+/// passes, entries of N per chunk of its assembly.
+pub(crate) const PARALLEL_PARTICLES: usize = 8192;
+
+/// True when a pass over `n` items (particles or entries, as the pass
+/// counts them) is worth handing to threads: more than one chunk of
+/// [`PARALLEL_PARTICLES`], and more than one thread.
+/// Each entry is computed as on one thread, so the numbers do not depend
+/// on the number of threads.
+pub(crate) fn parallel(n: usize) -> bool {
+    n > PARALLEL_PARTICLES && rayon::current_num_threads() > 1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use super::global::Global;
 use super::graph::{self, Numbering};
 use super::options::{Method, Options, SolverChoice};
-use super::plan::FamilyClusters;
+use super::plan::{parallel, FamilyClusters, PARALLEL_PARTICLES};
 use super::thermostat::Langevin;
 use super::ParticleSystem;
 use crate::error::StepError;
@@ -308,18 +308,4 @@ impl Rattle {
     pub(super) fn last_stamp(&self) -> u64 {
         self.stamp
     }
-}
-
-/// The chunk of the passes over every particle that run on threads:
-/// particles per chunk of the drift, entries (particles × D) per chunk of
-/// the closing kick and the finiteness checks.
-const PARALLEL_PARTICLES: usize = 8192;
-
-/// True when a pass over `n` items (particles or entries, as the pass
-/// counts them) is worth handing to threads: more than one chunk of
-/// [`PARALLEL_PARTICLES`], and more than one thread.
-/// Each entry is computed as on one thread, so the numbers do not depend
-/// on the number of threads.
-fn parallel(n: usize) -> bool {
-    n > PARALLEL_PARTICLES && rayon::current_num_threads() > 1
 }
