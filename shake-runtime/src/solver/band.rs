@@ -7,8 +7,8 @@ use rayon::prelude::*;
 /// (N_ij = 0 for |i − j| > b): L has the same band, so the factor overwrites
 /// the m (b + 1) stored numbers in place. Row i stores N_{i, i−b..=i}.
 ///
-/// From [`PARTITION_MIN`] rows on (and b ≥ 1) the rows are partitioned,
-/// once, by n and b alone: interiors I_0, I_1, …, I_K of [`BLOCK`] rows
+/// From 2¹⁶ rows on (`PARTITION_MIN`, and b ≥ 1) the rows are partitioned,
+/// once, by n and b alone: interiors I_0, I_1, …, I_K of 2¹⁴ rows (`BLOCK`)
 /// (the last one the rest), each followed but the last by a separator S_j
 /// of b rows. No entry of N couples two interiors (their rows are more
 /// than b apart), so in the order (I_0, …, I_K, S_0, …, S_{K−1}) N is
